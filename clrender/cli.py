@@ -1,0 +1,145 @@
+"""The ``clrender`` command line: info | scene | train | bake | render | eval."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def _cmd_info(args) -> int:
+    from . import device
+
+    devices = device.list_devices()
+    if not devices:
+        print("no OpenCL platform found")
+        return 1
+    chosen = None
+    try:
+        chosen = device.select_device(args.device)
+    except device.DeviceError as exc:
+        print(exc, file=sys.stderr)
+    for i, d in enumerate(devices):
+        info = device.device_info(d)
+        mark = "*" if chosen is not None and d == chosen else " "
+        print(f"{mark}[{i}] {info['platform']} ({info['platform_version']})")
+        for k, v in info.items():
+            if k not in ("platform", "platform_version"):
+                print(f"      {k:20s} {v}")
+    if chosen is not None:
+        print(f"selected: {chosen.platform.name.strip()} / {chosen.name.strip()}")
+    return 0 if chosen is not None else 2
+
+
+def _cmd_scene(args) -> int:
+    from .data.scene import make_scene
+
+    out = make_scene(args.kind, args.out, seed=args.seed, n_train=args.train, n_test=args.test,
+                     width=args.size, height=args.size)
+    print(f"wrote {args.kind} scene to {out}")
+    return 0
+
+
+def _cmd_train(args) -> int:
+    from .ngprt.train import train
+
+    train(args.data, args.out, preset=args.preset, variant=args.variant, L=args.levels,
+          iterations=args.iterations, seed=args.seed, device=args.torch_device)
+    return 0
+
+
+def _cmd_bake(args) -> int:
+    from .ngprt.bake import bake_run
+
+    path = bake_run(args.run, args.out)
+    print(f"wrote {path}")
+    return 0
+
+
+def _cmd_render(args) -> int:
+    from .render_video import render_path
+
+    render_path(args.model, args.out, path=args.path, frames=args.frames, width=args.width,
+                height=args.height, data=args.data, device=args.device,
+                background=tuple(args.background), fps=args.fps, use_G=not args.no_G)
+    return 0
+
+
+def _cmd_eval(args) -> int:
+    from .ngprt.evaluate import evaluate
+
+    result = evaluate(args.model, args.data, device=args.device, split=args.split,
+                      out_dir=args.save)
+    print(json.dumps(result["mean"], indent=2))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="clrender", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("info", help="list OpenCL platforms and devices")
+    s.add_argument("--device", default=None, help="device spec to select (default $CLRENDER_DEVICE)")
+    s.set_defaults(func=_cmd_info)
+
+    s = sub.add_parser("scene", help="built-in scenes")
+    ss = s.add_subparsers(dest="scene_command", required=True)
+    m = ss.add_parser("make", help="render a built-in scene to a Blender-format folder")
+    m.add_argument("kind", choices=["bounded", "unbounded"])
+    m.add_argument("out")
+    m.add_argument("--seed", type=int, default=0)
+    m.add_argument("--train", type=int, default=100, help="training views")
+    m.add_argument("--test", type=int, default=20, help="test views")
+    m.add_argument("--size", type=int, default=200, help="image width and height in pixels")
+    m.set_defaults(func=_cmd_scene)
+
+    s = sub.add_parser("train", help="train an NGP-RT model (PyTorch)")
+    s.add_argument("data", help="dataset folder (Blender transforms.json or LLFF poses_bounds.npy)")
+    s.add_argument("--out", required=True, help="run folder (checkpoints, config, log)")
+    s.add_argument("--preset", default="cpu", choices=["tiny", "cpu", "paper"])
+    s.add_argument("--variant", default="separate-v")
+    s.add_argument("--levels", type=int, default=2, help="fine hash levels L")
+    s.add_argument("--iterations", type=int, default=None, help="override the preset's count")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--torch-device", default=None, help="torch device (default cuda if present)")
+    s.set_defaults(func=_cmd_train)
+
+    s = sub.add_parser("bake", help="bake a trained run into a model file")
+    s.add_argument("run")
+    s.add_argument("--out", required=True)
+    s.set_defaults(func=_cmd_bake)
+
+    s = sub.add_parser("render", help="render a baked model along a camera path")
+    s.add_argument("model")
+    s.add_argument("--path", default="orbit", choices=["orbit", "spiral", "test"])
+    s.add_argument("--frames", type=int, default=60)
+    s.add_argument("--out", required=True, help="a .mp4/.gif file or a folder for PNGs")
+    s.add_argument("--width", type=int, default=400)
+    s.add_argument("--height", type=int, default=400)
+    s.add_argument("--data", default=None, help="dataset whose cameras define spiral/test paths")
+    s.add_argument("--background", type=float, nargs=3, default=[1.0, 1.0, 1.0])
+    s.add_argument("--fps", type=int, default=30)
+    s.add_argument("--no-G", action="store_true", help="march without the distance grid G")
+    s.add_argument("--device", default=None)
+    s.set_defaults(func=_cmd_render)
+
+    s = sub.add_parser("eval", help="PSNR/SSIM and ms/frame of a baked model on test views")
+    s.add_argument("model")
+    s.add_argument("data")
+    s.add_argument("--split", default="test")
+    s.add_argument("--save", default=None, help="folder for the rendered test views")
+    s.add_argument("--device", default=None)
+    s.set_defaults(func=_cmd_eval)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"clrender {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

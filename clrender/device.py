@@ -1,0 +1,196 @@
+"""OpenCL device choice, program building and caching.
+
+The device is chosen by ``CLRENDER_DEVICE`` (or the ``device=`` argument of the
+public functions):
+
+* ``gpu`` / ``cpu`` / ``accelerator``: the first device of that type;
+* an integer ``N`` or ``P:D``: the N-th device in :func:`list_devices` order, or
+  device D of platform P;
+* anything else: a case-insensitive substring of "platform name / device name".
+
+With nothing set, a GPU is preferred, then a CPU, then whatever exists (under
+Oclgrind the only device is the simulator). When nothing matches, the error lists
+the devices that exist.
+
+Programs are built from ``kernels/*.cl`` with ``-D`` specialisation and cached per
+(source text, options, device); kernels are fetched from a built program once.
+"""
+from __future__ import annotations
+
+import functools
+import os
+from dataclasses import dataclass
+from importlib import resources
+
+import numpy as np
+import pyopencl as cl
+
+# Identical float results to the numpy references: no fused multiply-add, correctly
+# rounded division and sqrt (the references use IEEE float32 throughout).
+BASE_OPTIONS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
+
+
+class DeviceError(RuntimeError):
+    """No OpenCL device matches the request."""
+
+
+@dataclass(frozen=True)
+class Runtime:
+    """A chosen device with its context and a profiling-enabled in-order queue."""
+
+    device: cl.Device
+    context: cl.Context
+    queue: cl.CommandQueue
+
+    @property
+    def name(self) -> str:
+        return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
+
+    def program(self, source_name: str, defines: dict | None = None) -> "Program":
+        """The program ``kernels/<source_name>`` built with ``-D`` defines (cached)."""
+        opts = tuple(f"-D{k}={_define_value(v)}" for k, v in sorted((defines or {}).items()))
+        return _build(self, source_name, opts)
+
+
+class Program:
+    """A built program whose kernel objects are fetched once and reused."""
+
+    def __init__(self, program: cl.Program):
+        self._program = program
+        self._kernels: dict[str, cl.Kernel] = {}
+
+    def kernel(self, name: str) -> cl.Kernel:
+        if name not in self._kernels:
+            self._kernels[name] = getattr(self._program, name)
+        return self._kernels[name]
+
+
+def _define_value(v) -> str:
+    if isinstance(v, bool):
+        return "1" if v else "0"
+    if isinstance(v, float):
+        return repr(float(np.float32(v))) + "f"
+    return str(v)
+
+
+def list_devices() -> list[cl.Device]:
+    """All OpenCL devices of all platforms, in platform order."""
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error:
+        return []
+    devices = []
+    for p in platforms:
+        try:
+            devices.extend(p.get_devices())
+        except cl.Error:
+            continue
+    return devices
+
+
+def device_type_name(device: cl.Device) -> str:
+    """"GPU", "CPU", "ACCELERATOR" or "OTHER" (device.type is a bit field)."""
+    for name in ("GPU", "CPU", "ACCELERATOR"):
+        if device.type & getattr(cl.device_type, name):
+            return name
+    return "OTHER"
+
+
+def _describe(devices: list[cl.Device]) -> str:
+    if not devices:
+        return "  (no OpenCL platform found: install pocl-binary-distribution or a vendor driver)"
+    lines = []
+    for i, d in enumerate(devices):
+        lines.append(f"  [{i}] {d.platform.name.strip()} / {d.name.strip()} "
+                     f"({device_type_name(d)})")
+    return "\n".join(lines)
+
+
+def select_device(spec: str | None = None) -> cl.Device:
+    """The device named by ``spec`` (or ``$CLRENDER_DEVICE``), see the module doc."""
+    spec = spec if spec is not None else os.environ.get("CLRENDER_DEVICE", "")
+    spec = spec.strip()
+    devices = list_devices()
+    if not devices:
+        raise DeviceError("no OpenCL device found:\n" + _describe(devices))
+    types = {"gpu": cl.device_type.GPU, "cpu": cl.device_type.CPU,
+             "accelerator": cl.device_type.ACCELERATOR}
+    if not spec:
+        for t in (cl.device_type.GPU, cl.device_type.CPU):
+            for d in devices:
+                if d.type & t:
+                    return d
+        return devices[0]
+    key = spec.lower()
+    if key in types:
+        match = [d for d in devices if d.type & types[key]]
+    elif key.isdigit():
+        match = [devices[int(key)]] if int(key) < len(devices) else []
+    elif ":" in key and all(part.isdigit() for part in key.split(":", 1)):
+        p, i = (int(part) for part in key.split(":", 1))
+        platforms = cl.get_platforms()
+        match = ([platforms[p].get_devices()[i]]
+                 if p < len(platforms) and i < len(platforms[p].get_devices()) else [])
+    else:
+        match = [d for d in devices
+                 if key in f"{d.platform.name} / {d.name}".lower()]
+    if not match:
+        raise DeviceError(f"no OpenCL device matches {spec!r}; devices that exist:\n"
+                          + _describe(devices))
+    return match[0]
+
+
+@functools.lru_cache(maxsize=None)
+def _runtime_for(device: cl.Device) -> Runtime:
+    context = cl.Context([device])
+    queue = cl.CommandQueue(context, properties=cl.command_queue_properties.PROFILING_ENABLE)
+    return Runtime(device, context, queue)
+
+
+def get_runtime(device: "str | Runtime | None" = None) -> Runtime:
+    """A cached :class:`Runtime` for ``device`` (a spec string, a Runtime, or None)."""
+    if isinstance(device, Runtime):
+        return device
+    return _runtime_for(select_device(device))
+
+
+def kernel_source(name: str) -> str:
+    """The text of ``kernels/<name>`` as installed with the package."""
+    return resources.files("clrender.kernels").joinpath(name).read_text()
+
+
+def _kernel_dir() -> str:
+    return str(resources.files("clrender.kernels"))
+
+
+@functools.lru_cache(maxsize=None)
+def _build(runtime: Runtime, source_name: str, options: tuple[str, ...]) -> Program:
+    source = kernel_source(source_name)
+    opts = list(BASE_OPTIONS) + list(options) + [f"-I{_kernel_dir()}"]
+    try:
+        program = cl.Program(runtime.context, source).build(options=opts)
+    except cl.RuntimeError as exc:
+        raise RuntimeError(f"kernels/{source_name}: build failed with {' '.join(options)}:\n{exc}") from exc
+    return Program(program)
+
+
+def event_ms(event: cl.Event) -> float:
+    """Kernel time of a finished profiling event, in milliseconds."""
+    event.wait()
+    return (event.profile.end - event.profile.start) * 1e-6
+
+
+def device_info(device: cl.Device) -> dict:
+    """Key limits of a device, for ``clrender info``."""
+    return {
+        "platform": device.platform.name.strip(),
+        "platform_version": device.platform.version.strip(),
+        "device": device.name.strip(),
+        "type": device_type_name(device),
+        "compute_units": device.max_compute_units,
+        "max_work_group_size": device.max_work_group_size,
+        "global_mem_MiB": device.global_mem_size >> 20,
+        "max_alloc_MiB": device.max_mem_alloc_size >> 20,
+        "local_mem_KiB": device.local_mem_size >> 10,
+        "version": device.version.strip(),
+    }

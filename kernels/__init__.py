@@ -1,0 +1,1 @@
+"""OpenCL sources (kernels/*.cl and headers), installed as package data of clrender.kernels."""
