@@ -1,0 +1,97 @@
+"""Cached scenes and trained/baked models for the benchmark harness.
+
+Models are keyed by a hash of everything that determines them (model config, training
+config, data fingerprint, seed), so tables that share a row configuration share a model
+(table2's L=4 row is table3's Separate-Att (V) row and table4's L=4 rows).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+BUILTIN_SCENES = {"builtin-bounded": "bounded", "builtin-unbounded": "unbounded"}
+
+
+def cache_root() -> Path:
+    """``$CLRENDER_CACHE``, else ``$XDG_CACHE_HOME/clrender``, else ``~/.cache/clrender``."""
+    if os.environ.get("CLRENDER_CACHE"):
+        return Path(os.environ["CLRENDER_CACHE"])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "clrender"
+
+
+def resolve_scene(scene: str, root: Path) -> Path:
+    """A dataset folder for ``scene``: a built-in name (generated once) or a path."""
+    if scene in BUILTIN_SCENES:
+        path = root / "scenes" / f"{scene}-seed0"
+        if not (path / "transforms_train.json").is_file():
+            from clrender.data import make_scene
+
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=".tmp-scene-"))
+            make_scene(BUILTIN_SCENES[scene], tmp, seed=0)
+            shutil.rmtree(path, ignore_errors=True)
+            os.replace(tmp, path)
+        return path
+    path = Path(scene)
+    if not path.is_dir():
+        raise ValueError(f"--scene {scene!r}: neither a built-in scene "
+                         f"({', '.join(BUILTIN_SCENES)}) nor a dataset folder")
+    return path
+
+
+def data_fingerprint(path: Path) -> str:
+    """sha256 over the relative names and bytes of every file of a dataset folder."""
+    h = hashlib.sha256()
+    for f in sorted(p for p in Path(path).rglob("*") if p.is_file()):
+        h.update(str(f.relative_to(path)).encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class ModelEntry:
+    """A trained and baked model in the cache."""
+
+    key: str
+    baked: Path
+    run_dir: Path
+    train_minutes: float
+
+
+def _model_key(spec: dict) -> str:
+    return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, variant: str, L: int,
+                 seed: int = 0, torch_device: str | None = None) -> ModelEntry:
+    """Train (if missing) and bake (if missing) the model of one table row."""
+    from clrender.ngprt.bake import bake_run
+    from clrender.ngprt.config import preset as model_preset
+    from clrender.ngprt.train import train, train_preset
+
+    spec = {"model": model_preset(preset, variant=variant, L=L).to_dict(),
+            "train": asdict(train_preset(preset)), "data": fingerprint, "seed": seed}
+    key = _model_key(spec)
+    folder = root / "models" / key
+    meta_path, baked = folder / "meta.json", folder / "model.npz"
+    if not meta_path.is_file():
+        folder.mkdir(parents=True, exist_ok=True)
+        start = time.perf_counter()
+        train(str(data), str(folder / "run"), preset=preset, variant=variant, L=L, seed=seed,
+              device=torch_device)
+        minutes = (time.perf_counter() - start) / 60.0
+        bake_run(folder / "run", baked)
+        tmp = meta_path.with_suffix(".tmp")
+        tmp.write_text(json.dumps({"spec": spec, "train_minutes": minutes}, indent=2))
+        os.replace(tmp, meta_path)
+    elif not baked.is_file():
+        bake_run(folder / "run", baked)
+    meta = json.loads(meta_path.read_text())
+    return ModelEntry(key, baked, folder / "run", float(meta["train_minutes"]))

@@ -1,0 +1,143 @@
+"""Write a measured table: Markdown (ours beside the paper's), CSV, JSON, plot, samples."""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import re
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+
+# Our measurement behind each paper column (None: we cannot measure it here).
+OURS = {
+    "PSNR": lambda m: m["PSNR"],
+    "SSIM": lambda m: m["SSIM"],
+    "LPIPS": lambda m: None,
+    "Time (ms)": lambda m: m["time"]["median"],
+    "FPS": lambda m: 1000.0 / m["time"]["median"],
+    "Marching": lambda m: m["Marching"],
+    "Occupied": lambda m: m["Occupied"],
+}
+FORMAT = {"PSNR": "{:.2f}", "SSIM": "{:.3f}", "LPIPS": "{:.3f}", "Time (ms)": "{:.1f}",
+          "FPS": "{:.1f}", "Marching": "{:.1f}", "Occupied": "{:.1f}"}
+
+
+def slug(name: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
+
+
+def _write(path: Path, data: bytes | str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_bytes(data.encode() if isinstance(data, str) else data)
+    os.replace(tmp, path)
+
+
+def _fmt(col: str, value) -> str:
+    return "n/a" if value is None else FORMAT.get(col, "{:.3g}").format(value)
+
+
+def markdown(table, results: list[dict], meta: dict) -> str:
+    """The table with each paper column as "ours" and "paper" sub-columns."""
+    extra = [c for c in ("Marching", "Occupied") if c not in table.paper_columns]
+    head = ["Row"]
+    for col in table.paper_columns:
+        head += [col, f"{col} (paper)"]
+    head += extra + ["Time p10-p90 (ms)", "Size (MB)", "Train (min)"]
+    lines = [f"## {table.title}", "",
+             f"Ours: {meta['scene']} scene, `{meta['preset']}` preset, {meta['device']}, "
+             f"test views at {meta['resolution']}. Paper: {table.paper_source}.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for row, m in zip(table.rows, results):
+        cells = [row.name]
+        for col in table.paper_columns:
+            cells += [_fmt(col, OURS[col](m)), _fmt(col, row.paper.get(col))]
+        cells += [_fmt(c, OURS[c](m)) for c in extra]
+        cells += [f"{m['time']['p10']:.1f}-{m['time']['p90']:.1f}", f"{m['size_MB']:.1f}",
+                  f"{m['train_minutes']:.1f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "Time: OpenCL kernel time per frame (ray marching + deferred MLP), median of "
+              f"{results[0]['time']['n']} timed frames. LPIPS needs pretrained network weights that "
+              "cannot be downloaded here, so it is not measured.", ""]
+    return "\n".join(lines)
+
+
+def _plot(table, results: list[dict]) -> bytes:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    series = [("ours", [m["time"]["median"] for m in results], [m["PSNR"] for m in results]),
+              ("paper", [r.paper.get("Time (ms)") for r in table.rows],
+               [r.paper.get("PSNR") for r in table.rows])]
+    for ax, (who, xs, ys) in zip(axes, series):
+        for row, x, y in zip(table.rows, xs, ys):
+            if x is not None and y is not None:
+                ax.scatter(x, y)
+                ax.annotate(row.name, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=8)
+        ax.set_xlabel("time per frame (ms)")
+        ax.set_ylabel("PSNR (dB)")
+        ax.set_title(f"{table.key}: {who}")
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
+    """Write TABLE.md/.csv/.json/.png and one sample render per row; returns the Markdown."""
+    md = markdown(table, results, meta)
+    _write(out_dir / f"{table.key}.md", md)
+    records = []
+    for row, m in zip(table.rows, results):
+        sample = out_dir / table.key / f"{slug(row.name)}.png"
+        _write(sample, iio.imwrite("<bytes>", (np.clip(m["sample"], 0, 1) * 255 + 0.5)
+                                   .astype(np.uint8), extension=".png"))
+        rec = {"row": row.name, "variant": row.variant, "L": row.L, "use_G": row.use_G,
+               "PSNR": m["PSNR"], "SSIM": m["SSIM"], "time_ms": m["time"], "wall_ms": m["wall_ms"],
+               "FPS": 1000.0 / m["time"]["median"], "Marching": m["Marching"],
+               "Occupied": m["Occupied"], "size_MB": m["size_MB"],
+               "train_minutes": m["train_minutes"], "model_key": m["model_key"],
+               "sample": str(sample.relative_to(out_dir)),
+               "paper": row.paper}
+        records.append(rec)
+    _write(out_dir / f"{table.key}.json", json.dumps({**meta, "table": table.key,
+                                                      "title": table.title,
+                                                      "paper_source": table.paper_source,
+                                                      "rows": records}, indent=2))
+    buf = io.StringIO()
+    cols = ["row", "variant", "L", "use_G", "PSNR", "SSIM", "time_ms_median", "time_ms_p10",
+            "time_ms_p90", "FPS", "Marching", "Occupied", "size_MB", "train_minutes"]
+    cols += [f"paper_{c}" for c in table.paper_columns]
+    writer = csv.writer(buf)
+    writer.writerow(cols)
+    for r in records:
+        writer.writerow([r["row"], r["variant"], r["L"], r["use_G"], f"{r['PSNR']:.4f}",
+                         f"{r['SSIM']:.4f}", f"{r['time_ms']['median']:.3f}",
+                         f"{r['time_ms']['p10']:.3f}", f"{r['time_ms']['p90']:.3f}",
+                         f"{r['FPS']:.2f}", f"{r['Marching']:.2f}", f"{r['Occupied']:.2f}",
+                         f"{r['size_MB']:.3f}", f"{r['train_minutes']:.2f}"]
+                        + [r["paper"].get(c, "") for c in table.paper_columns])
+    _write(out_dir / f"{table.key}.csv", buf.getvalue())
+    _write(out_dir / f"{table.key}.png", _plot(table, results))
+    return md
+
+
+def write_index(out_dir: Path, tables: list, meta: dict) -> None:
+    """results/README.md: every table with a link and one sample render per row."""
+    lines = ["# clrender benchmark results", "",
+             f"{meta['date']}, git {meta['git_revision']}, {meta['device']}, "
+             f"`{meta['preset']}` preset, {meta['scene']} scene.", ""]
+    for table in tables:
+        lines += [f"## [{table.title}]({table.key}.md)", "",
+                  f"![quality vs time]({table.key}.png)", "",
+                  " ".join(f"![{r.name}]({table.key}/{slug(r.name)}.png)" for r in table.rows),
+                  "", " | ".join(r.name for r in table.rows), ""]
+    _write(out_dir / "README.md", "\n".join(lines))

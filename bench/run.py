@@ -1,0 +1,102 @@
+"""Reproduce NGP-RT's ablation tables on real renders.
+
+    python -m bench.run                     # table4, built-in bounded scene, `cpu` preset
+    python -m bench.run table3 --preset tiny
+    python -m bench.run all --out results/
+    python -m bench.run --list
+
+Trains what is missing (models cached by a hash of config and data, shared across
+tables), bakes, renders every test view with the OpenCL renderer and writes
+``results/TABLE.{md,csv,json,png}`` plus a sample render per row.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import subprocess
+import sys
+from pathlib import Path
+
+from tqdm import tqdm
+
+from bench import ablation, cache, report
+
+
+def _git_revision() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, check=True, cwd=Path(__file__).parent).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def run_table(table, data: Path, fingerprint: str, args, meta: dict) -> str:
+    """Train/bake what is missing, measure every row, write the table's files."""
+    from bench.measure import measure_row
+    from clrender.data import load_dataset
+
+    test_set = load_dataset(data, split="test")
+    results = []
+    for row in tqdm(table.rows, desc=table.key, unit="row"):
+        entry = cache.ensure_model(args.cache, data, fingerprint, args.preset or table.preset,
+                                   row.variant, row.L, seed=args.seed,
+                                   torch_device=args.torch_device)
+        m = measure_row(entry.baked, test_set, row.use_G, device=args.device,
+                        repeats=args.repeats)
+        m.update(train_minutes=entry.train_minutes, model_key=entry.key)
+        results.append(m)
+    cam = test_set.cameras[0]
+    meta = {**meta, "resolution": f"{cam.width}x{cam.height}"}
+    return report.write_table(args.out, table, results, meta)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m bench.run", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("table", nargs="?", default="table4", help="a table name, or `all`")
+    p.add_argument("--list", action="store_true", help="list the tables and exit")
+    p.add_argument("--preset", choices=["tiny", "cpu", "paper"], default=None,
+                   help="model/training preset (default: the table's, `cpu`)")
+    p.add_argument("--scene", default=None,
+                   help="builtin-bounded | builtin-unbounded | a dataset folder (default: the table's)")
+    p.add_argument("--device", default=None, help="OpenCL device spec (see `clrender info`)")
+    p.add_argument("--torch-device", default=None, help="torch device for training")
+    p.add_argument("--out", type=Path, default=Path("results"))
+    p.add_argument("--cache", type=Path, default=None, help="model/scene cache folder")
+    p.add_argument("--repeats", type=int, default=5, help="timing passes per row")
+    p.add_argument("--seed", type=int, default=0)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.list:
+        for key in ablation.list_tables():
+            t = ablation.load_table(key)
+            print(f"{key:8s} {t.title} ({len(t.rows)} rows)")
+        return 0
+    try:
+        keys = ablation.list_tables() if args.table == "all" else [args.table]
+        tables = [ablation.load_table(k) for k in keys]
+        args.cache = args.cache or cache.cache_root()
+        from clrender.device import get_runtime
+
+        meta = {"device": get_runtime(args.device).name, "git_revision": _git_revision(),
+                "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+        for table in tables:
+            scene = args.scene or table.scene
+            data = cache.resolve_scene(scene, args.cache)
+            fingerprint = cache.data_fingerprint(data)
+            meta.update(preset=args.preset or table.preset, scene=scene)
+            print(run_table(table, data, fingerprint, args, meta))
+        if args.table == "all":
+            report.write_index(args.out, tables, meta)
+        print(f"results written to {args.out}/")
+    except ValueError as exc:
+        print(f"bench.run: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
