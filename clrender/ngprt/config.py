@@ -122,9 +122,9 @@ PRESETS: dict[str, ModelConfig] = {
     # The paper's sizes (S2.1, S2.5).
     "paper": ModelConfig(L_C=512, log2_T=22, G_res=256, aux_log2_T=21),
     # Trains the built-in bounded scene on 2 CPU cores in about 10 minutes.
-    "cpu": ModelConfig(L_C=128, log2_T=18, G_res=64, aux_log2_T=17),
+    "cpu": ModelConfig(L_C=64, log2_T=18, G_res=32, aux_levels=4, aux_log2_T=17),
     # For tests: trains in well under a minute.
-    "tiny": ModelConfig(L_C=32, log2_T=14, G_res=16, aux_log2_T=14),
+    "tiny": ModelConfig(L_C=32, log2_T=14, G_res=16, aux_levels=3, aux_log2_T=14),
 }
 
 

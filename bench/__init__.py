@@ -1,0 +1,1 @@
+"""Benchmarks: each module writes results/ files and prints tables; none asserts."""

@@ -1,0 +1,366 @@
+"""The baked NGP-RT file: a versioned ``.npz`` of plain arrays plus a JSON manifest.
+
+A baked model is everything the renderers need and nothing else: the sparse coarse grid,
+the fine hash tables, the occupancy mip, the occupancy distance grid ``G`` and the small
+MLPs (docs/ngprt.md "Baked file"). Files are read with ``allow_pickle=False`` and
+validated (names, shapes, dtypes, finite values, index ranges, occupancy consistency)
+before anything reaches a kernel.
+
+Examples:
+    >>> model = load_baked("lego.npz")           # raises BakedFormatError when invalid
+    >>> model.step, model.config.L_C
+    >>> save_baked(model, "copy.npz")
+
+References: NGP-RT (Hu et al., ECCV 2024) §4.3, S2.5.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import binary_dilation, distance_transform_edt
+
+from .config import DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM, ModelConfig
+
+FORMAT = "clrender-ngprt"
+VERSION = 1
+_F32, _U8, _I32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
+_CHUNK = 1 << 18          # coarse corners evaluated per call of a corner-value callable
+
+
+class BakedFormatError(ValueError):
+    """An invalid baked file or model; the message names the file and the problem."""
+
+
+@dataclass
+class BakedModel:
+    """A baked NGP-RT model.
+
+    Attributes:
+        config: the model's shape.
+        gamma: step scaler; the lattice step is ``s = gamma * config.s0`` (S2.3).
+        arrays: exactly the arrays of :func:`expected_arrays` (docs/ngprt.md "Baked file").
+    """
+
+    config: ModelConfig
+    gamma: float
+    arrays: dict
+
+    @property
+    def step(self) -> float:
+        """The float32 lattice step ``s = gamma * s0`` (as a Python float)."""
+        return float(np.float32(self.gamma * self.config.s0))
+
+    @property
+    def n_blocks(self) -> int:
+        return int(np.shape(self.arrays["coarse_blocks"])[0])
+
+    def occupancy_mip(self) -> list[np.ndarray]:
+        """``[occupancy_0 .. occupancy_4]``, uint8 grids of resolution ``L_C >> lev``."""
+        return [self.arrays[f"occupancy_{lev}"] for lev in range(N_MIP)]
+
+
+def expected_arrays(config: ModelConfig, n_blocks: int) -> dict:
+    """``{name: (shape, dtype)}`` of every array of a baked model with ``n_blocks`` blocks."""
+    c = config
+    nb, h, n_in = c.L_C // c.coarse_block, DEFERRED_HIDDEN, 7 + SH_DIM
+    out = {
+        "coarse_block_index": ((nb, nb, nb), _I32),
+        "coarse_blocks": ((n_blocks,) + (c.coarse_block + 1,) * 3 + (c.coarse_channels,), _F32),
+        "fine_tables": ((c.L, c.T, FEATURES), _F32),
+    }
+    for lev in range(N_MIP):
+        out[f"occupancy_{lev}"] = ((c.L_C >> lev,) * 3, _U8)
+    out["G"] = ((c.G_res,) * 3, _U8)
+    for name, shape in (("deferred_w0", (n_in, h)), ("deferred_b0", (h,)),
+                        ("deferred_w1", (h, h)), ("deferred_b1", (h,)),
+                        ("deferred_w2", (h, 3)), ("deferred_b2", (3,))):
+        out[name] = (shape, _F32)
+    if c.variant == "mlp":
+        for name, shape in (("fusion_w0", (FEATURES * c.L, FUSION_HIDDEN)),
+                            ("fusion_b0", (FUSION_HIDDEN,)),
+                            ("fusion_w1", (FUSION_HIDDEN, FEATURES)), ("fusion_b1", (FEATURES,))):
+            out[name] = (shape, _F32)
+    if c.n_inv_attention:
+        out["attention_inv"] = ((c.n_inv_attention,), _F32)
+    return out
+
+
+# ---- building the occupancy structures --------------------------------------------
+
+def build_mip(occupancy_0: np.ndarray) -> list[np.ndarray]:
+    """The 5-level occupancy mip: ``occupancy_{lev+1}`` is the 2x max-pool of level lev.
+
+    Args:
+        occupancy_0: (L_C, L_C, L_C) 0/1 (any dtype; nonzero is occupied).
+    Returns:
+        [occupancy_0 .. occupancy_4], uint8 0/1 of resolutions L_C >> lev.
+    """
+    level = (np.asarray(occupancy_0) != 0).astype(np.uint8)
+    levels = [level]
+    for _ in range(N_MIP - 1):
+        r = level.shape[0] // 2
+        level = level.reshape(r, 2, r, 2, r, 2).max(axis=(1, 3, 5))
+        levels.append(level)
+    return levels
+
+
+def _pool(grid: np.ndarray, res: int) -> np.ndarray:
+    f = grid.shape[0] // res
+    return grid.reshape(res, f, res, f, res, f).max(axis=(1, 3, 5))
+
+
+def build_distance_grid(occupancy_0: np.ndarray, G_res: int) -> np.ndarray:
+    """The occupancy distance grid G (paper §4.3), exact and conservative.
+
+    A G-voxel is occupied when any ``occupancy_0`` cell inside it is. G stores, rounded
+    down, the distance from the *closest point* of a voxel to the nearest occupied voxel
+    (box-to-box distance, not centre-to-centre as a plain EDT gives): for integer offset
+    ``D`` between the voxels it is ``|max(|D| - 1, 0)|``, which equals the centre EDT to
+    the occupied set dilated by one voxel (3x3x3). So from any point of a voxel every point
+    closer than ``G / G_res`` in u (``2 G / G_res`` world units when bounded) is empty.
+    Capped at 255; 255 everywhere when all is empty.
+
+    Args:
+        occupancy_0: (L_C, L_C, L_C) 0/1; G_res must divide L_C.
+    Returns:
+        G: (G_res, G_res, G_res) uint8, in G-voxel units.
+    """
+    occ = _pool((np.asarray(occupancy_0) != 0).astype(np.uint8), G_res).astype(bool)
+    if not occ.any():
+        return np.full((G_res,) * 3, 255, np.uint8)
+    near = binary_dilation(occ, structure=np.ones((3, 3, 3), bool))
+    return np.minimum(np.floor(distance_transform_edt(~near)), 255).astype(np.uint8)
+
+
+def sparse_coarse_grid(corner_values, occupancy_0: np.ndarray, B: int,
+                       channels: int | None = None):
+    """The sparse coarse grid: blocks of B^3 cells holding (B+1)^3 corner values.
+
+    Only blocks containing an occupied ``occupancy_0`` cell are stored.
+
+    Args:
+        corner_values: dense corner values, (L_C+1, L_C+1, L_C+1, C) or ((L_C+1)^3, C),
+            or a callable ``f(corners)`` mapping (M, 3) int64 corner indices to (M, C)
+            values, called only for corners of present blocks (in chunks).
+        occupancy_0: (L_C, L_C, L_C) 0/1.
+        B: cells per block side (``ModelConfig.coarse_block``).
+        channels: C, needed only for a callable when no block is present (else the
+            callable is asked for zero corners).
+    Returns:
+        block_index: (L_C/B,)*3 int32, -1 for absent blocks, else 0..n_blocks-1 in C order.
+        blocks: (n_blocks, B+1, B+1, B+1, C) float32; corner ``i + c`` of the block of
+            cell ``i`` is ``blocks[block, i % B + c]``.
+    """
+    occ = np.asarray(occupancy_0) != 0
+    L_C = occ.shape[0]
+    nb = L_C // B
+    present = _pool(occ.astype(np.uint8), nb).astype(bool)
+    block_index = np.full((nb,) * 3, -1, np.int32)
+    ids = np.argwhere(present)                       # C order
+    block_index[tuple(ids.T)] = np.arange(len(ids), dtype=np.int32)
+    local = np.stack(np.meshgrid(*(np.arange(B + 1),) * 3, indexing="ij"), -1).reshape(-1, 3)
+    corners = (ids[:, None, :] * B + local[None]).reshape(-1, 3).astype(np.int64)
+    if callable(corner_values):
+        if len(corners) == 0 and channels is not None:
+            values = np.zeros((0, channels), np.float32)
+        else:
+            parts = [np.asarray(corner_values(corners[a:a + _CHUNK]), np.float32)
+                     for a in range(0, max(len(corners), 1), _CHUNK)]
+            values = np.concatenate(parts).reshape(len(corners), -1)
+    else:
+        dense = np.asarray(corner_values, np.float32)
+        dense = dense.reshape((L_C + 1,) * 3 + (-1,))
+        values = dense[corners[:, 0], corners[:, 1], corners[:, 2]]
+    blocks = values.reshape((len(ids),) + (B + 1,) * 3 + (values.shape[-1],))
+    return block_index, np.ascontiguousarray(blocks, np.float32)
+
+
+# ---- validation -------------------------------------------------------------------
+
+def _fail(where: str, problem: str):
+    raise BakedFormatError(f"{where}: {problem}")
+
+
+def _check_arrays(model: BakedModel, where: str) -> dict:
+    arrays, cfg = model.arrays, model.config
+    blocks = arrays.get("coarse_blocks")
+    n_blocks = int(np.shape(blocks)[0]) if blocks is not None and np.ndim(blocks) == 5 else 0
+    expected = expected_arrays(cfg, n_blocks)
+    missing, extra = sorted(set(expected) - set(arrays)), sorted(set(arrays) - set(expected))
+    if missing:
+        _fail(where, f"missing arrays {missing} (variant {cfg.variant!r})")
+    if extra:
+        _fail(where, f"unexpected arrays {extra} (variant {cfg.variant!r})")
+    for name, (shape, dtype) in expected.items():
+        a = arrays[name]
+        if not isinstance(a, np.ndarray):
+            _fail(where, f"{name} is a {type(a).__name__}, expected a numpy array")
+        if a.dtype != dtype:
+            _fail(where, f"{name} has dtype {a.dtype}, expected {dtype}")
+        if a.shape != shape:
+            _fail(where, f"{name} has shape {a.shape}, expected {shape}")
+        if dtype == _F32 and not np.all(np.isfinite(a)):
+            bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
+            _fail(where, f"{name} has {bad} non-finite values (NaN or inf)")
+    return expected
+
+
+def _check_blocks(model: BakedModel, where: str):
+    index, n_blocks = model.arrays["coarse_block_index"], model.n_blocks
+    if index.size and (index.min() < -1 or index.max() >= n_blocks):
+        _fail(where, f"coarse_block_index has values in [{index.min()}, {index.max()}], "
+                     f"expected -1 or a block in [0, {n_blocks})")
+    used = np.sort(index[index >= 0])
+    if len(used) != n_blocks or np.any(used != np.arange(n_blocks)):
+        _fail(where, f"coarse_block_index must reference each of the {n_blocks} blocks "
+                     f"exactly once ({len(used)} references, {len(np.unique(used))} distinct)")
+
+
+def _check_occupancy(model: BakedModel, where: str):
+    cfg, mip = model.config, model.occupancy_mip()
+    for lev, grid in enumerate(mip):
+        if grid.size and grid.max() > 1:
+            _fail(where, f"occupancy_{lev} has values other than 0 and 1 (max {grid.max()})")
+    for lev, (want, grid) in enumerate(zip(build_mip(mip[0]), mip)):
+        if not np.array_equal(want, grid):
+            _fail(where, f"occupancy_{lev} is not the 2x max-pool of occupancy_{lev - 1} "
+                         f"({int(np.count_nonzero(want != grid))} cells differ)")
+    nb = cfg.L_C // cfg.coarse_block
+    covered = _pool(mip[0], nb).astype(bool)
+    absent = covered & (model.arrays["coarse_block_index"] < 0)
+    if absent.any():
+        _fail(where, f"{int(absent.sum())} coarse blocks hold occupied occupancy_0 cells "
+                     f"but are absent (coarse_block_index == -1)")
+    want_G = build_distance_grid(mip[0], cfg.G_res)
+    over = model.arrays["G"] > want_G
+    if over.any():
+        _fail(where, f"G is not conservative: {int(over.sum())} voxels exceed the distance "
+                     f"to the nearest occupied voxel (max excess "
+                     f"{int((model.arrays['G'].astype(int) - want_G).max())})")
+
+
+def validate(model: BakedModel, where: str = "model") -> None:
+    """Check a baked model against docs/ngprt.md; raises :class:`BakedFormatError`.
+
+    Checks: names, shapes and dtypes of the arrays, finite floats, block indices in
+    [-1, n_blocks) with every block referenced once, occupancy 0/1 and a consistent mip,
+    occupied cells in present blocks, G conservative (never above the recomputed G),
+    gamma > 0. ``where`` (e.g. the file name) starts every message.
+    """
+    if not isinstance(model.config, ModelConfig):
+        _fail(where, f"config is a {type(model.config).__name__}, expected ModelConfig")
+    try:
+        gamma = float(model.gamma)
+    except (TypeError, ValueError):
+        _fail(where, f"gamma {model.gamma!r} is not a number")
+    if not (np.isfinite(gamma) and gamma > 0):
+        _fail(where, f"gamma must be finite and > 0, got {model.gamma!r}")
+    if not isinstance(model.arrays, dict):
+        _fail(where, f"arrays is a {type(model.arrays).__name__}, expected a dict")
+    _check_arrays(model, where)
+    _check_blocks(model, where)
+    _check_occupancy(model, where)
+
+
+# ---- files ------------------------------------------------------------------------
+
+def _manifest(model: BakedModel) -> dict:
+    return {"format": FORMAT, "version": VERSION, "config": model.config.to_dict(),
+            "gamma": float(model.gamma),
+            "arrays": {n: {"shape": list(a.shape), "dtype": str(a.dtype)}
+                       for n, a in sorted(model.arrays.items())}}
+
+
+def save_baked(model: BakedModel, path) -> Path:
+    """Validate ``model`` and write it to ``path`` atomically (temp file + rename).
+
+    Returns:
+        the path written.
+    """
+    path = Path(path)
+    validate(model, str(path))
+    payload = {n: np.ascontiguousarray(a) for n, a in model.arrays.items()}
+    payload["manifest"] = np.array(json.dumps(_manifest(model)))
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent or ".")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez_compressed(f, **payload)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+_READ_ERRORS = (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, KeyError)
+
+
+def _read_manifest(npz, where: str) -> dict:
+    if "manifest" not in npz.files:
+        _fail(where, "no 'manifest' entry: not a clrender baked model")
+    raw = npz["manifest"]
+    if raw.dtype.kind != "U" or raw.shape != ():
+        _fail(where, f"manifest must be a 0-d unicode array, found {raw.dtype} {raw.shape}")
+    try:
+        manifest = json.loads(str(raw))
+    except json.JSONDecodeError as e:
+        _fail(where, f"manifest is not valid JSON ({e})")
+    if not isinstance(manifest, dict):
+        _fail(where, "manifest is not a JSON object")
+    if manifest.get("format") != FORMAT:
+        _fail(where, f"format is {manifest.get('format')!r}, expected {FORMAT!r}")
+    if manifest.get("version") != VERSION:
+        _fail(where, f"unknown version {manifest.get('version')!r}; this reader knows "
+                     f"version {VERSION}")
+    for key in ("config", "gamma", "arrays"):
+        if key not in manifest:
+            _fail(where, f"manifest has no {key!r}")
+    return manifest
+
+
+def load_baked(path) -> BakedModel:
+    """Load and validate a baked model; raises :class:`BakedFormatError` naming the file."""
+    where = str(path)
+    try:
+        npz = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise
+    except _READ_ERRORS as e:
+        raise BakedFormatError(f"{where}: not a readable .npz archive "
+                               f"(truncated or corrupt?): {e}") from e
+    if not isinstance(npz, np.lib.npyio.NpzFile):
+        _fail(where, "not an .npz archive (a single .npy array)")
+    with npz:
+        try:
+            manifest = _read_manifest(npz, where)
+            arrays = {n: npz[n] for n in npz.files if n != "manifest"}
+        except BakedFormatError:
+            raise
+        except _READ_ERRORS as e:
+            raise BakedFormatError(f"{where}: cannot read the archive's arrays "
+                                   f"(truncated or corrupt?): {e}") from e
+    try:
+        config = ModelConfig.from_dict(manifest["config"], where=f"{where}: config")
+    except (TypeError, ValueError) as e:
+        raise BakedFormatError(f"{where}: bad config: {e}") from e
+    listed = manifest["arrays"]
+    if not isinstance(listed, dict) or set(listed) != set(arrays):
+        names = sorted(listed) if isinstance(listed, dict) else listed
+        _fail(where, f"manifest lists arrays {names}, the archive holds {sorted(arrays)}")
+    for name, a in arrays.items():
+        meta = listed[name]
+        if not isinstance(meta, dict) or list(meta.get("shape", [])) != list(a.shape) \
+                or meta.get("dtype") != str(a.dtype):
+            _fail(where, f"{name} is {a.dtype} {a.shape} but the manifest says {meta}")
+    model = BakedModel(config, manifest["gamma"], arrays)
+    validate(model, where)
+    model.gamma = float(model.gamma)
+    return model

@@ -1,0 +1,354 @@
+"""Numpy reference renderer of a baked NGP-RT model: the readable specification.
+
+Follows docs/ngprt.md operation for operation in float32, in the order of the doc's
+formulas, so that ``kernels/ngprt_march.cl`` (FP contraction off, correctly rounded
+division and sqrt) reproduces positions, cells and lattice indices bit for bit; values
+that go through ``exp`` may differ by a few ulps. All active rays march in lockstep, one
+lattice point per iteration, with masks.
+
+Examples:
+    >>> from clrender.ngprt.random_model import random_baked_model
+    >>> out = render_reference(random_baked_model(config), camera)
+    >>> out["rgb"].shape, out["n_march"].sum()
+
+References: NGP-RT (Hu et al., ECCV 2024) Eq. 5-9, §4.3, S2.3, S2.5.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..camera import generate_rays
+from .config import N_MIP, T_STOP
+from .encoding import hash_corner, sh4
+from .space import cell_index, ray_box, to_grid, unwarp, warp
+
+F32 = np.float32
+# Corner c = 0..7 of a cell is offset ((c >> 2) & 1, (c >> 1) & 1, c & 1): x slowest.
+_CORNERS = np.array([[(c >> 2) & 1, (c >> 1) & 1, c & 1] for c in range(8)], np.int64)
+
+
+def _sigmoid(x: np.ndarray) -> np.ndarray:
+    return (F32(1.0) / (F32(1.0) + np.exp(-x))).astype(F32)
+
+
+def _lattice_g(k: np.ndarray, s: F32) -> np.ndarray:
+    """Warped distance ``(float)k * s`` of lattice index k."""
+    return k.astype(F32) * s
+
+
+def _point_u(cfg, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(M, 3) grid coordinates of ``o + t * d``."""
+    return to_grid(o + t[:, None] * d, cfg.extent, cfg.scene == "unbounded")
+
+
+def _cells(u: np.ndarray, res: np.ndarray) -> np.ndarray:
+    """:func:`space.cell_index` with a per-row resolution ``res`` (M,) int."""
+    r = res.astype(F32)[:, None]
+    return np.clip(np.floor(u * r), 0, (res - 1)[:, None]).astype(np.int64)
+
+
+# ---- ray range --------------------------------------------------------------------
+
+def ray_range(cfg, o: np.ndarray, d: np.ndarray):
+    """The ray's distance range ``[t_start, t_end]`` (world units).
+
+    Bounded: ``[max(near, t_in), t_out]`` of the ray/[-1, 1]^3 box; unbounded: [near, far].
+    Returns:
+        t_start, t_end: (N,) float32; hit: (N,) bool, False where the range is empty
+        (a missed box, or NaN from an axis-parallel ray outside it): no lattice point.
+    """
+    unbounded = cfg.scene == "unbounded"
+    if unbounded:
+        t_start = np.full(len(o), F32(cfg.near))
+        t_end = np.full(len(o), F32(cfg.far))
+    else:
+        t_in, t_out = ray_box(o, d, 1.0)
+        t_start, t_end = np.fmax(F32(cfg.near), t_in), t_out
+    hit = t_start <= t_end                      # False also for NaN
+    return t_start, t_end, hit
+
+
+# ---- occupancy --------------------------------------------------------------------
+
+def exit_level(model, u: np.ndarray) -> np.ndarray:
+    """(M,) int: the first level, coarse (4) to fine (0), whose cell at u is empty; -1
+    when u is occupied at every level (a sample)."""
+    mip, L_C = model.occupancy_mip(), model.config.L_C
+    out = np.full(len(u), -1, np.int64)
+    undecided = np.ones(len(u), bool)
+    for lev in range(N_MIP - 1, -1, -1):
+        i = cell_index(u[undecided], L_C >> lev)
+        empty = mip[lev][i[:, 0], i[:, 1], i[:, 2]] == 0
+        rows = np.flatnonzero(undecided)[empty]
+        out[rows] = lev
+        undecided[rows] = False
+    return out
+
+
+def g_distance(model, u: np.ndarray, exit_lev: np.ndarray, use_G: bool) -> np.ndarray:
+    """(M,) int G value at u, read only when the exit level is coarser than G; else 0."""
+    cfg = model.config
+    g = np.zeros(len(u), np.int64)
+    if not use_G:
+        return g
+    read = (cfg.L_C >> exit_lev) < cfg.G_res
+    i = cell_index(u[read], cfg.G_res)
+    g[read] = model.arrays["G"][i[:, 0], i[:, 1], i[:, 2]]
+    return g
+
+
+# ---- empty-space skipping ---------------------------------------------------------
+
+def skip_bounded(model, k, t, o, d, u, exit_lev, g, s, g_end) -> np.ndarray:
+    """Next lattice index (> k) after an empty point, closed form (Eq. 9).
+
+    ``k_O`` is the first lattice point at or past the exit of the empty mip cell, ``k_G``
+    the last one within G's empty ball of radius ``r = 2 g / G_res`` (world units).
+    """
+    cfg = model.config
+    res = cfg.L_C >> exit_lev
+    h = F32(2.0) / res.astype(F32)
+    lo = _cells(u, res).astype(F32) * h[:, None] - F32(1.0)
+    hi = lo + h[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_a = (np.where(d > 0, hi, lo) - o) / d
+    t_exit = np.where(d != 0, t_a, F32(np.inf)).min(axis=1)
+    lim = g_end / s + F32(2.0)      # past the ray's end any k will do: keeps ints small
+    k_next = np.maximum(k + 1, np.ceil(np.minimum(t_exit / s - F32(1e-3), lim)).astype(np.int64))
+    r = F32(2.0) * g.astype(F32) / F32(cfg.G_res)
+    k_G = np.floor(np.minimum((t + r) / s, lim)).astype(np.int64)
+    return np.where(g > 0, np.maximum(k_next, k_G), k_next)
+
+
+def skip_unbounded(model, k, o, d, u, exit_lev, g, s, g_end) -> np.ndarray:
+    """Next lattice index (> k) after an empty point, by walking the lattice with
+    arithmetic only (no memory reads): on while the point stays in the empty mip cell or,
+    when G was read, closer than ``g / G_res`` (u units) to u."""
+    cfg = model.config
+    res = cfg.L_C >> exit_lev
+    cell = _cells(u, res)
+    radius = g.astype(F32) / F32(cfg.G_res)        # u is in [0, 1]^3
+    k = k + 1
+    walking = _lattice_g(k, s) < g_end
+    while walking.any():
+        w = np.flatnonzero(walking)
+        uk = _point_u(cfg, o[w], d[w], unwarp(_lattice_g(k[w], s), True))
+        same = np.all(_cells(uk, res[w]) == cell[w], axis=1)
+        du = uk - u[w]
+        dist = np.sqrt(du[:, 0] * du[:, 0] + du[:, 1] * du[:, 1] + du[:, 2] * du[:, 2])
+        stay = same | ((g[w] > 0) & (dist < radius[w]))
+        k[w[stay]] += 1
+        walking[w] = stay & (_lattice_g(k[w], s) < g_end[w])
+    return k
+
+
+# ---- features at a sample (Eq. 6-8) -------------------------------------------------
+
+def _trilinear_weights(w: np.ndarray) -> list[np.ndarray]:
+    """Weights of the 8 corners (x slowest), each ``wx * wy * wz`` in that order."""
+    out = []
+    for cx, cy, cz in _CORNERS:
+        wx = w[:, 0] if cx else F32(1.0) - w[:, 0]
+        wy = w[:, 1] if cy else F32(1.0) - w[:, 1]
+        wz = w[:, 2] if cz else F32(1.0) - w[:, 2]
+        out.append(wx * wy * wz)
+    return out
+
+
+def coarse_features(model, u: np.ndarray) -> np.ndarray:
+    """(M, 8 + n_attention) trilinear coarse channels at u from the sparse coarse grid."""
+    cfg, a = model.config, model.arrays
+    B = cfg.coarse_block
+    i = cell_index(u, cfg.L_C).astype(np.int64)
+    w = u * F32(cfg.L_C) - i.astype(F32)
+    bi = i // B
+    b = a["coarse_block_index"][bi[:, 0], bi[:, 1], bi[:, 2]]
+    r = i - bi * B
+    blocks = a["coarse_blocks"]
+    f = np.zeros((len(u), cfg.coarse_channels), F32)
+    for wc, c in zip(_trilinear_weights(w), _CORNERS):
+        j = r + c
+        f = f + wc[:, None] * blocks[b, j[:, 0], j[:, 1], j[:, 2]]
+    return f
+
+
+def fine_features(model, u: np.ndarray, l: int) -> np.ndarray:
+    """(M, 8) trilinear features of hash level l (resolution L_C * 2^(l+1))."""
+    cfg = model.config
+    p = u * F32(cfg.L_C << (l + 1))
+    i = np.floor(p).astype(np.int64)
+    w = p - i.astype(F32)
+    table = model.arrays["fine_tables"][l]
+    f = np.zeros((len(u), 8), F32)
+    for wc, c in zip(_trilinear_weights(w), _CORNERS):
+        j = i + c
+        f = f + wc[:, None] * table[hash_corner(j[:, 0], j[:, 1], j[:, 2], cfg.T)]
+    return f
+
+
+def fuse(model, fine: list[np.ndarray], attention: np.ndarray) -> np.ndarray:
+    """(M, 8) fusion of the fine features ``fine[l]`` (M, 8) by the model's variant.
+
+    ``attention``: (M, n_attention) coarse attention logits (``-v`` variants).
+    """
+    cfg, a = model.config, model.arrays
+    v = cfg.variant
+    if v == "mlp":
+        x = np.concatenate(fine, axis=1)
+        h = np.maximum(x @ a["fusion_w0"] + a["fusion_b0"], F32(0.0))
+        return (h @ a["fusion_w1"] + a["fusion_b1"]).astype(F32)
+    logits = None
+    if v in ("shared-v", "separate-v"):
+        logits = attention
+    elif v in ("shared-inv", "separate-inv"):
+        logits = np.broadcast_to(a["attention_inv"], (len(attention),) + a["attention_inv"].shape)
+    out = np.zeros_like(fine[0])
+    for l, f in enumerate(fine):
+        if v == "sum":
+            out = out + f
+        elif v.startswith("shared"):
+            out = out + _sigmoid(logits[:, l])[:, None] * f
+        else:  # Eq. 7-8: omega weighs the density channel, beta the 7 colour channels
+            omega, beta = _sigmoid(logits[:, 2 * l]), _sigmoid(logits[:, 2 * l + 1])
+            weight = np.concatenate([omega[:, None], np.repeat(beta[:, None], 7, 1)], axis=1)
+            out = out + weight * f
+    return out
+
+
+def features(model, u: np.ndarray) -> np.ndarray:
+    """(M, 8) features ``coarse(u) + fuse(u)`` (Eq. 6): [sigma logit, diffuse, specular]."""
+    coarse = coarse_features(model, u)
+    fine = [fine_features(model, u, l) for l in range(model.config.L)]
+    return coarse[:, :8] + fuse(model, fine, coarse[:, 8:])
+
+
+# ---- the march --------------------------------------------------------------------
+
+class _Rays:
+    """Per-ray march state (N rays)."""
+
+    def __init__(self, n: int):
+        self.k = np.zeros(n, np.int64)
+        self.T = np.ones(n, F32)
+        self.acc = np.zeros((n, 7), F32)
+        self.opacity = np.zeros(n, F32)
+        self.depth_acc = np.zeros(n, F32)
+        self.n_march = np.zeros(n, np.int32)
+        self.n_occ = np.zeros(n, np.int32)
+
+
+def next_t(model, k: np.ndarray, s: F32, g_end: np.ndarray) -> np.ndarray:
+    """End ``t_{k+1}`` of the interval of lattice point k (world units).
+
+    Unbounded scenes end the last interval at the ray's far end: the lattice reaches g = 2
+    (t = infinity) and ``unwarp`` is undefined beyond, so ``t_{k+1} = unwarp(min((k+1)*s,
+    g_end))``. Bounded scenes use ``(k+1)*s`` as is (it may pass the box, harmlessly).
+    """
+    g = _lattice_g(k + 1, s)
+    if model.config.scene != "unbounded":
+        return g
+    return unwarp(np.minimum(g, g_end), True)
+
+
+def composite(model, st: _Rays, rows, u, t, s, g_end) -> None:
+    """Alpha-composite the samples of rays ``rows`` at u (distance t) and step on.
+
+    ``g_end``: (len(rows),) warped end of those rays."""
+    f = features(model, u)
+    k = st.k[rows]
+    sigma = np.exp(f[:, 0])
+    delta = next_t(model, k, s, g_end) - t
+    alpha = F32(1.0) - np.exp(-sigma * delta)
+    T = st.T[rows]
+    w = T * alpha
+    st.acc[rows] = st.acc[rows] + w[:, None] * f[:, 1:8]
+    st.opacity[rows] = st.opacity[rows] + w
+    st.depth_acc[rows] = st.depth_acc[rows] + w * t
+    st.T[rows] = T * (F32(1.0) - alpha)
+    st.n_occ[rows] += 1
+    st.k[rows] = k + 1
+
+
+def march_reference(model, origins: np.ndarray, dirs: np.ndarray, use_G: bool = True) -> dict:
+    """March rays through a baked model (docs/ngprt.md "The march, per ray").
+
+    Args:
+        model: a :class:`clrender.ngprt.baked.BakedModel`.
+        origins, dirs: (N, 3) float32 world-space rays, dirs unit length.
+        use_G: skip empty space with the occupancy distance grid G as well as the mip.
+    Returns:
+        acc: (N, 7) float32 composited diffuse rgb (3) and specular (4) features;
+        opacity: (N,) float32 in [0, 1]; depth: (N,) float32 world units along the ray
+        (0 where opacity is 0); n_march, n_occ: (N,) int32 marching / occupied points.
+    """
+    cfg = model.config
+    unbounded = cfg.scene == "unbounded"
+    o = np.ascontiguousarray(origins, F32).reshape(-1, 3)
+    d = np.ascontiguousarray(dirs, F32).reshape(-1, 3)
+    s = F32(model.step)
+    t_start, t_end, hit = ray_range(cfg, o, d)
+    g_end = warp(t_end, unbounded)
+    st = _Rays(len(o))
+    with np.errstate(invalid="ignore", over="ignore"):
+        st.k[hit] = np.ceil(warp(t_start[hit], unbounded) / s).astype(np.int64)
+    active = hit & (_lattice_g(st.k, s) < g_end)
+    with np.errstate(over="ignore"):
+        while active.any():
+            rows = np.flatnonzero(active)
+            st.n_march[rows] += 1
+            t = unwarp(_lattice_g(st.k[rows], s), unbounded)
+            u = _point_u(cfg, o[rows], d[rows], t)
+            lev = exit_level(model, u)
+            occ = lev < 0
+            if occ.any():
+                composite(model, st, rows[occ], u[occ], t[occ], s, g_end[rows[occ]])
+            e = ~occ
+            if e.any():
+                r, ue, le = rows[e], u[e], lev[e]
+                g = g_distance(model, ue, le, use_G)
+                if unbounded:
+                    st.k[r] = skip_unbounded(model, st.k[r], o[r], d[r], ue, le, g, s, g_end[r])
+                else:
+                    st.k[r] = skip_bounded(model, st.k[r], t[e], o[r], d[r], ue, le, g, s,
+                                           g_end[r])
+            active[rows] = (_lattice_g(st.k[rows], s) < g_end[rows]) & (st.T[rows] >= F32(T_STOP))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        depth = np.where(st.opacity > 0, st.depth_acc / st.opacity, F32(0.0)).astype(F32)
+    return {"acc": st.acc, "opacity": st.opacity, "depth": depth,
+            "n_march": st.n_march, "n_occ": st.n_occ}
+
+
+# ---- per pixel (Eq. 5) ------------------------------------------------------------
+
+def deferred_reference(model, acc: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """The deferred MLP: (N, 3) float32 rgb in (0, 1) before background blending.
+
+    Args:
+        acc: (N, 7) composited features from :func:`march_reference`.
+        dirs: (N, 3) float32 unit view directions.
+    """
+    a = model.arrays
+    acc = np.asarray(acc, F32)
+    x = np.concatenate([acc[:, 0:3], acc[:, 3:7], sh4(dirs)], axis=1)
+    h1 = np.maximum(x @ a["deferred_w0"] + a["deferred_b0"], F32(0.0))
+    h2 = np.maximum(h1 @ a["deferred_w1"] + a["deferred_b1"], F32(0.0))
+    return _sigmoid(acc[:, 0:3] + h2 @ a["deferred_w2"] + a["deferred_b2"])
+
+
+def render_reference(model, camera, background=(1.0, 1.0, 1.0), use_G: bool = True) -> dict:
+    """Render a camera view with the reference renderer.
+
+    Returns:
+        rgb: (H, W, 3) float32, blended over ``background``; depth, opacity: (H, W)
+        float32; n_march, n_occ: (H, W) int32.
+    """
+    origins, dirs = generate_rays(camera)
+    H, W = camera.height, camera.width
+    out = march_reference(model, origins.reshape(-1, 3), dirs.reshape(-1, 3), use_G)
+    rgb = deferred_reference(model, out["acc"], dirs.reshape(-1, 3))
+    op = out["opacity"][:, None]
+    rgb = rgb * op + np.asarray(background, F32) * (F32(1.0) - op)
+    res = {"rgb": rgb.astype(F32).reshape(H, W, 3)}
+    for name in ("depth", "opacity", "n_march", "n_occ"):
+        res[name] = out[name].reshape(H, W)
+    return res

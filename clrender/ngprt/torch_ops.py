@@ -1,0 +1,302 @@
+"""Torch twins of the numpy primitives in :mod:`clrender.ngprt.space` and
+:mod:`clrender.ngprt.encoding` (same float32 operations in the same order), plus the
+trilinear corner helpers training needs.
+
+Each function takes tensors on any device and keeps their device; ``tests/test_train.py``
+compares them with the numpy originals on random inputs.
+
+References: MERF (Reiser et al. 2023) Eq. 7; Instant-NGP (Mueller et al. 2022) Eq. 4;
+NGP-RT S2.1, S2.3.
+"""
+from __future__ import annotations
+
+import torch
+
+from .encoding import HASH_PRIMES
+
+# The 8 corner offsets of a cell, corner c = (c >> 2 & 1, c >> 1 & 1, c & 1) (x slowest).
+_CORNERS = [((c >> 2) & 1, (c >> 1) & 1, c & 1) for c in range(8)]
+
+
+def corner_offsets(device) -> torch.Tensor:
+    """(8, 3) int64 corner offsets, x slowest."""
+    return torch.tensor(_CORNERS, dtype=torch.int64, device=device)
+
+
+def contract(x: torch.Tensor) -> torch.Tensor:
+    """MERF contraction of (..., 3) float32 points into [-2, 2]^3 (``space.contract``)."""
+    ax = x.abs()
+    m = torch.maximum(torch.maximum(ax[..., 0], ax[..., 1]), ax[..., 2])[..., None]
+    m_safe = torch.clamp(m, min=1.0)
+    s = x / m_safe
+    scaled = s * (2.0 - 1.0 / m_safe)
+    return torch.where(m <= 1.0, x, torch.where(ax == m, scaled, s))
+
+
+def warp(t: torch.Tensor, unbounded: bool) -> torch.Tensor:
+    """Warped distance g(t) (``space.warp``); identity for bounded scenes."""
+    if not unbounded:
+        return t
+    return torch.where(t <= 1.0, t, 2.0 - 1.0 / torch.clamp(t, min=1.0))
+
+
+def unwarp(g: torch.Tensor, unbounded: bool) -> torch.Tensor:
+    """Inverse of :func:`warp` (``space.unwarp``): distance t for warped distance g < 2."""
+    if not unbounded:
+        return g
+    return torch.where(g <= 1.0, g, 1.0 / (2.0 - torch.clamp(g, min=1.0)))
+
+
+def ray_box(origins: torch.Tensor, dirs: torch.Tensor, extent: float = 1.0):
+    """Entry and exit distances of (N, 3) rays with [-extent, extent]^3 (``space.ray_box``).
+
+    Returns:
+        t_in, t_out: (N,) float32; t_in > t_out when the ray misses.
+    """
+    inv = 1.0 / dirs
+    t0 = (-extent - origins) * inv
+    t1 = (extent - origins) * inv
+    lo, hi = torch.fmin(t0, t1), torch.fmax(t0, t1)
+    t_in = torch.fmax(torch.fmax(lo[:, 0], lo[:, 1]), lo[:, 2])
+    t_out = torch.fmin(torch.fmin(hi[:, 0], hi[:, 1]), hi[:, 2])
+    return t_in, t_out
+
+
+def to_grid(points: torch.Tensor, extent: float, unbounded: bool) -> torch.Tensor:
+    """Grid coordinates u in [0, 1]^3 of (..., 3) world points (``space.to_grid``)."""
+    c = contract(points) if unbounded else points
+    return (c + extent) / (2.0 * extent)
+
+
+def cell_index(u: torch.Tensor, res: int) -> torch.Tensor:
+    """(..., 3) int64 cell of grid coordinates u at resolution ``res``, clamped."""
+    return torch.clamp(torch.floor(u * float(res)), 0, res - 1).to(torch.int64)
+
+
+def hash_corner(ix: torch.Tensor, iy: torch.Tensor, iz: torch.Tensor, T: int) -> torch.Tensor:
+    """Instant-NGP hash into [0, T) (``encoding.hash_corner``), T a power of two <= 2^32.
+
+    int64 products keep the low 32 bits of the uint32 products, which is all the mask keeps
+    (negative corners wrap like the uint32 cast in numpy).
+    """
+    h = (ix * HASH_PRIMES[0]) ^ (iy * HASH_PRIMES[1]) ^ (iz * HASH_PRIMES[2])
+    return h & (T - 1)
+
+
+def sh4(dirs: torch.Tensor) -> torch.Tensor:
+    """(N, 16) degree-4 real SH of (N, 3) unit directions (``encoding.sh4``)."""
+    x, y, z = dirs[:, 0], dirs[:, 1], dirs[:, 2]
+    xy, xz, yz = x * y, x * z, y * z
+    x2, y2, z2 = x * x, y * y, z * z
+    out = [
+        torch.full_like(x, 0.28209479177387814),
+        -0.48860251190291987 * y,
+        0.48860251190291987 * z,
+        -0.48860251190291987 * x,
+        1.0925484305920792 * xy,
+        -1.0925484305920792 * yz,
+        0.94617469575755997 * z2 - 0.31539156525251999,
+        -1.0925484305920792 * xz,
+        0.54627421529603959 * x2 - 0.54627421529603959 * y2,
+        0.59004358992664352 * y * (-3.0 * x2 + y2),
+        2.8906114426405538 * xy * z,
+        0.45704579946446572 * y * (1.0 - 5.0 * z2),
+        0.3731763325901154 * z * (5.0 * z2 - 3.0),
+        0.45704579946446572 * x * (1.0 - 5.0 * z2),
+        1.4453057213202769 * z * (x2 - y2),
+        0.59004358992664352 * x * (-x2 + 3.0 * y2),
+    ]
+    return torch.stack(out, dim=-1)
+
+
+def trilinear_corners(p: torch.Tensor, base: torch.Tensor | None = None):
+    """Corners and weights of trilinear interpolation at lattice coordinates ``p``.
+
+    Args:
+        p: (N, 3) float32 coordinates in lattice units (``u * R``).
+        base: (N, 3) int64 lower corner; default ``floor(p)`` (pass the clamped cell for
+            the coarse grid, docs/ngprt.md "Coarse").
+    Returns:
+        corners: (N, 8, 3) int64 corner coordinates (x slowest).
+        weights: (N, 8) float32, weight of corner ``+1`` along an axis is ``p - base``.
+    """
+    if base is None:
+        base = torch.floor(p).to(torch.int64)
+    w = p - base.to(p.dtype)
+    off = corner_offsets(p.device)
+    corners = base[:, None, :] + off[None]
+    wsel = torch.where(off[None].bool(), w[:, None, :], 1.0 - w[:, None, :])
+    return corners, wsel[..., 0] * wsel[..., 1] * wsel[..., 2]
+
+
+# -- the step lattice and packed compositing (docs/ngprt.md "Step lattice", "The march") --
+
+def lattice_samples(origins: torch.Tensor, dirs: torch.Tensor, occupancy: torch.Tensor,
+                    s: float, near: float, far: float, extent: float, unbounded: bool):
+    """The lattice points ``t_k = unwarp(k * s)`` of each ray that fall in occupied cells.
+
+    Args:
+        origins, dirs: (R, 3) float32 rays (unit directions).
+        occupancy: (L_C, L_C, L_C) bool grid; a point is kept when its cell is True.
+        s: lattice step in warped distance (``gamma * s0``).
+        near, far, extent, unbounded: from the ModelConfig.
+    Returns:
+        ray_ids: (M,) int64, non-decreasing; samples of a ray are in marching order.
+        k: (M,) int64 lattice index.
+        t: (M,) float32 distance along the ray; delta: (M,) float32 interval length
+            (docs/ngprt.md "Step lattice": the last unbounded one ends at ``far``).
+        u: (M, 3) float32 grid coordinates.
+    """
+    dev, R = origins.device, occupancy.shape[0]
+    s_t = torch.tensor(s, dtype=torch.float32, device=dev)
+    if unbounded:
+        t_start = torch.full_like(origins[:, 0], near)
+        t_end = torch.full_like(origins[:, 0], far)
+    else:
+        t_in, t_end = ray_box(origins, dirs, extent)
+        t_start = torch.clamp(t_in, min=near)
+    g_end = warp(t_end, unbounded)
+    k0 = torch.ceil(warp(t_start, unbounded) / s_t)
+    n = torch.clamp(torch.ceil(g_end / s_t) - k0 + 1, min=0)
+    n = torch.nan_to_num(n, nan=0.0).to(torch.int64)
+    k0 = torch.nan_to_num(k0, nan=0.0).to(torch.int64)
+    ray_ids = torch.repeat_interleave(torch.arange(len(origins), device=dev), n)
+    first = torch.cumsum(n, 0) - n
+    k = k0[ray_ids] + torch.arange(len(ray_ids), device=dev) - first[ray_ids]
+    g = k.to(torch.float32) * s_t
+    keep = g < g_end[ray_ids]
+    ray_ids, k, g = ray_ids[keep], k[keep], g[keep]
+    t = unwarp(g, unbounded)
+    u = to_grid(origins[ray_ids] + t[:, None] * dirs[ray_ids], extent, unbounded)
+    cell = cell_index(u, R)
+    keep = occupancy[cell[:, 0], cell[:, 1], cell[:, 2]]
+    ray_ids, k, t, u = ray_ids[keep], k[keep], t[keep], u[keep]
+    g_next = (k + 1).to(torch.float32) * s_t
+    if unbounded:   # the last interval ends at the ray's end (unwarp is undefined at 2)
+        g_next = torch.minimum(g_next, g_end[ray_ids])
+    delta = unwarp(g_next, unbounded) - t
+    return ray_ids, k, t, delta, u
+
+
+def _segment_exclusive_cumsum(x: torch.Tensor, ray_ids: torch.Tensor, n_rays: int):
+    """Per-ray exclusive cumulative sum of packed values x (M,) (float64 accumulation)."""
+    cs = torch.cumsum(x.double(), 0)
+    excl = cs - x.double()
+    counts = torch.bincount(ray_ids, minlength=n_rays)
+    first = torch.cumsum(counts, 0) - counts
+    return excl - excl[first[ray_ids]]
+
+
+def composite_weights(sigma: torch.Tensor, delta: torch.Tensor, ray_ids: torch.Tensor,
+                      n_rays: int, t_stop: float | None = None, return_T: bool = False):
+    """Volume-rendering weights ``w_i = T_i * alpha_i`` of packed samples (M,).
+
+    ``alpha = 1 - exp(-sigma * delta)``; ``T_i = prod_{j<i} (1 - alpha_j)`` within the ray.
+    With ``t_stop`` a sample counts only while ``T_i >= t_stop`` (the renderer's early stop).
+    With ``return_T`` also returns the transmittance ``T_i`` (M,) in front of each sample.
+    """
+    tau = sigma * delta
+    T = torch.exp(-_segment_exclusive_cumsum(tau, ray_ids, n_rays)).to(sigma.dtype)
+    w = T * (1.0 - torch.exp(-tau))
+    if t_stop is not None:
+        w = torch.where(T >= t_stop, w, torch.zeros_like(w))
+    return (w, T) if return_T else w
+
+
+def accumulate(values: torch.Tensor, ray_ids: torch.Tensor, n_rays: int) -> torch.Tensor:
+    """Per-ray sums of packed values (M, ...) -> (n_rays, ...)."""
+    out = torch.zeros((n_rays,) + values.shape[1:], dtype=values.dtype, device=values.device)
+    return out.index_add_(0, ray_ids, values)
+
+
+def distortion_loss(w: torch.Tensor, k: torch.Tensor, s: float, ray_ids: torch.Tensor,
+                    n_rays: int) -> torch.Tensor:
+    """Mip-NeRF 360 distortion loss (S2.2, Eq. S2) per ray (n_rays,), on the lattice: the
+    interval of sample k is ``[k*s, (k+1)*s]`` in warped distance (world t when bounded)."""
+    m = (k.to(w.dtype) + 0.5) * s
+    W = _segment_exclusive_cumsum(w, ray_ids, n_rays).to(w.dtype)
+    S = _segment_exclusive_cumsum(w * m, ray_ids, n_rays).to(w.dtype)
+    per_sample = 2.0 * w * (m * W - S) + (s / 3.0) * w * w
+    return accumulate(per_sample, ray_ids, n_rays)
+
+
+# -- multi-level grid lookups (fused gather; the main training cost on CPU) --
+
+class _WeightedGather(torch.autograd.Function):
+    """``out[n] = sum_j w[n, j] * table[idx[n, j]]``; gradient for the table only (sample
+    positions are not optimised). Forward is one fused ``embedding_bag``; the backward
+    scatters with ``bincount`` on CPU (several times faster there than ``index_add_``)."""
+
+    @staticmethod
+    def forward(ctx, table, idx, w):
+        ctx.save_for_backward(idx, w)
+        ctx.shape = table.shape
+        return torch.nn.functional.embedding_bag(idx, table, per_sample_weights=w, mode="sum")
+
+    @staticmethod
+    def backward(ctx, g):
+        idx, w = ctx.saved_tensors
+        n_rows, n_feat = ctx.shape
+        flat = idx.reshape(-1)
+        gw = (w[..., None] * g[:, None, :]).reshape(-1, n_feat)
+        if g.device.type == "cpu":
+            grad = torch.stack([torch.bincount(flat, gw[:, c], minlength=n_rows)
+                                for c in range(n_feat)], 1).to(g.dtype)
+        else:
+            grad = torch.zeros(ctx.shape, dtype=g.dtype, device=g.device).index_add_(0, flat, gw)
+        return grad, None, None
+
+
+def _level_indices(base: torch.Tensor, res, T: int, dense: bool) -> torch.Tensor:
+    """(N, lev, 8) table rows of the corners ``base + c`` of a group of levels.
+
+    Built per axis at (N, lev, 2) and combined by broadcasting, so only a few passes touch
+    the full (N, lev, 8) size (these passes dominate the training time on CPU).
+    """
+    c = base[..., None] + torch.arange(2, device=base.device)        # (N, lev, 3, 2)
+    if dense:
+        r1 = torch.tensor([int(r) + 1 for r in res], device=base.device)[None, :, None]
+        c = torch.minimum(torch.clamp(c, min=0), r1[..., None] - 1)
+        x, y, z = c[:, :, 0] * (r1 * r1), c[:, :, 1] * r1, c[:, :, 2]
+        return (x[..., :, None, None] + y[..., None, :, None] + z[..., None, None, :]).flatten(2)
+    x, y, z = c[:, :, 0] * HASH_PRIMES[0], c[:, :, 1] * HASH_PRIMES[1], c[:, :, 2] * HASH_PRIMES[2]
+    h = x[..., :, None, None] ^ y[..., None, :, None] ^ z[..., None, None, :]
+    return (h & (T - 1)).flatten(2)
+
+
+def grid_lookup(tables: torch.Tensor, u: torch.Tensor, resolutions, dense=None) -> torch.Tensor:
+    """Trilinear multi-level grid features at grid coordinates u.
+
+    Args:
+        tables: (n_levels, T, F) float32 parameters.
+        u: (N, 3) float32 grid coordinates in [0, 1].
+        resolutions: n_levels ints; level l samples at ``p = u * R_l``, corners ``floor(p)
+            + c`` hashed with :func:`hash_corner` into [0, T) (docs/ngprt.md "Fine level").
+        dense: optional n_levels bools; a True level (they must come first) indexes its
+            ``(R+1)^3`` corners densely instead (auxiliary NGP levels that fit the table).
+    Returns:
+        (N, n_levels, F) features.
+    """
+    n_lev, T, n_feat = tables.shape
+    dense = list(dense) if dense is not None else [False] * n_lev
+    n_dense = sum(dense)
+    if dense != [True] * n_dense + [False] * (n_lev - n_dense):
+        raise ValueError(f"grid_lookup: dense levels must come first, got {dense}")
+    res = torch.tensor([float(r) for r in resolutions], device=u.device)
+    p = u[:, None, :] * res[None, :, None]                          # (N, lev, 3)
+    base = torch.floor(p)
+    w1 = p - base
+    base = base.to(torch.int64)
+    parts = []
+    if n_dense:
+        parts.append(_level_indices(base[:, :n_dense], resolutions[:n_dense], T, True))
+    if n_dense < n_lev:
+        parts.append(_level_indices(base[:, n_dense:], resolutions[n_dense:], T, False))
+    idx = torch.cat(parts, 1) if len(parts) > 1 else parts[0]
+    idx = idx + (torch.arange(n_lev, device=u.device) * T)[None, :, None]
+    wx = torch.stack([1.0 - w1, w1], -1)                             # (N, lev, 3, 2)
+    w = (wx[:, :, 0, :, None, None] * wx[:, :, 1, None, :, None]
+         * wx[:, :, 2, None, None, :]).flatten(2)                    # (N, lev, 8)
+    out = _WeightedGather.apply(tables.reshape(n_lev * T, n_feat), idx.reshape(-1, 8),
+                                w.reshape(-1, 8))
+    return out.reshape(len(u), n_lev, n_feat)

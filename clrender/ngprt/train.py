@@ -1,0 +1,313 @@
+"""Training NGP-RT (PyTorch, CPU or CUDA).
+
+A run folder holds ``config.json`` (model config, train config, data path),
+``checkpoint.pt`` (model, optimizer, training occupancy, gamma, step) and ``log.jsonl``
+(one JSON line per logged step: loss, psnr, gamma, samples per ray, rays, eta, lr).
+
+Examples:
+    >>> run = train("/tmp/scn_b", "/tmp/run_b", preset="cpu", variant="separate-v", L=2)
+    >>> model, occ, gamma, cfg = load_run(run)
+
+References: NGP-RT (Hu et al., ECCV 2024) S2.2 (loss), S2.3 (step auto-tuning),
+S2.4 (optimisation); Instant-NGP / nerfacc occupancy grid.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from . import torch_ops as ops
+from .config import ModelConfig, preset as model_preset
+from .model import NGPRT, render_rays
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation hyper-parameters (S2.2-S2.4); presets change counts, never the method.
+
+    Attributes:
+        iterations: optimiser steps.
+        max_rays, target_samples: per-batch budget; the ray count adapts so a batch holds
+            about ``target_samples`` samples, never more than ``max_rays`` rays (S2.4).
+        lr, lr_warmup: peak learning rate, reached linearly over the first ``lr_warmup``
+            fraction of iterations, then linear decay to 0.
+        eta, eta_warmup: distortion-loss weight, reached linearly over the first
+            ``eta_warmup`` fraction of iterations (S2.2, S2.4).
+        huber_delta: transition point of the Huber colour loss (the paper does not give
+            it; with 0.1 the CPU-sized runs stall near a constant colour, measured, so the
+            loss is quadratic over the whole [0, 1] error range).
+        n_min, kappa, gamma_min, gamma_init: step auto-tuning (Eq. S3).
+        occ_every, occ_warmup, occ_decay, occ_threshold, occ_fraction: training occupancy
+            grid: update period, steps during which every cell is re-evaluated, EMA decay,
+            alpha threshold, fraction of cells sampled per update after the warm-up.
+        checkpoint_every, log_every: in iterations.
+    """
+
+    iterations: int = 100_000
+    max_rays: int = 8000
+    target_samples: int = 1 << 21
+    lr: float = 1e-2
+    lr_warmup: float = 0.01
+    betas: tuple = (0.9, 0.99)
+    eps: float = 1e-8
+    eta: float = 0.01
+    eta_warmup: float = 0.5
+    huber_delta: float = 1.0
+    n_min: float = 3.0
+    kappa: float = 0.001
+    gamma_min: float = 0.2217
+    gamma_init: float = 1.0
+    occ_every: int = 16
+    occ_warmup: int = 256
+    occ_decay: float = 0.95
+    occ_threshold: float = 0.01
+    occ_fraction: float = 0.25
+    checkpoint_every: int = 1000
+    log_every: int = 50
+
+
+TRAIN_PRESETS: dict[str, TrainConfig] = {
+    "paper": TrainConfig(),
+    # Short runs visit each cell far fewer times than 100k iterations would, so the
+    # occupancy EMA decays faster to prune empty space within the run.
+    "cpu": TrainConfig(iterations=1800, max_rays=4096, target_samples=1 << 14, occ_every=32,
+                       occ_warmup=64, occ_decay=0.6, occ_fraction=0.5, checkpoint_every=250,
+                       log_every=25),
+    "tiny": TrainConfig(iterations=300, max_rays=1024, target_samples=1 << 13, occ_every=16,
+                        occ_warmup=32, occ_decay=0.6, occ_fraction=0.5, checkpoint_every=300,
+                        log_every=10),
+}
+
+
+def pick_device(device=None) -> torch.device:
+    """``device`` or cuda when present, else cpu."""
+    if device is None:
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(device)
+
+
+class OccupancyGrid:
+    """Training occupancy at L_C: EMA of per-cell alpha (density times step), as
+    Instant-NGP / nerfacc; ``binary`` marks cells worth sampling.
+
+    Args:
+        cfg: the model config (L_C, scene).
+        device: torch device.
+    """
+
+    def __init__(self, cfg: ModelConfig, device):
+        self.cfg, self.R = cfg, cfg.L_C
+        self.ema = torch.zeros(self.R ** 3, device=device)
+        self.binary = torch.ones((self.R,) * 3, dtype=torch.bool, device=device)
+
+    def _step_scale(self, u: torch.Tensor) -> torch.Tensor:
+        """World length of a unit of warped distance at u (1 inside the unit ball/box)."""
+        if self.cfg.scene == "bounded":
+            return torch.ones_like(u[:, 0])
+        m = (u * 2 * self.cfg.extent - self.cfg.extent).abs().amax(-1)
+        return torch.clamp(1.0 / torch.clamp(2.0 - m, min=1e-2) ** 2, max=1e4)
+
+    @torch.no_grad()
+    def update(self, model: NGPRT, step: int, warmup: int, fraction: float, decay: float,
+               threshold: float, chunk: int = 1 << 16):
+        n = self.R ** 3
+        dev = self.ema.device
+        if step < warmup:
+            cells = torch.arange(n, device=dev)
+        else:
+            m = max(1, int(n * fraction))
+            occupied = torch.nonzero(self.binary.reshape(-1))[:, 0]
+            pick = occupied[torch.randint(len(occupied), (m,), device=dev)] if len(occupied) \
+                else occupied
+            cells = torch.cat([torch.randint(n, (m,), device=dev), pick])
+        # Every corner once when the corner grid is small (CPU presets); per chunk otherwise.
+        corner_grid = model.all_corner_values() if (self.R + 1) ** 3 <= 1 << 23 else None
+        for i in range(0, len(cells), chunk):
+            c = cells[i:i + chunk]
+            ijk = torch.stack([c // (self.R * self.R), (c // self.R) % self.R, c % self.R], -1)
+            u = (ijk.to(torch.float32) + torch.rand(len(c), 3, device=dev)) / self.R
+            alpha = model.sample(u, corner_grid)[0] * self.cfg.s0 * self._step_scale(u)
+            self.ema[c] = torch.maximum(self.ema[c] * decay, alpha)
+        thre = min(threshold, float(self.ema.mean()))
+        self.binary = (self.ema > thre).reshape((self.R,) * 3)
+
+
+class RaySampler:
+    """Random training rays across all images (float32, NeRF camera convention).
+
+    With ``alpha`` ((N, H, W) coverage of images with an alpha channel) the targets are
+    re-composited on a random background per ray, as Instant-NGP does for synthetic
+    scenes: on a fixed background the model can paint empty space in the background
+    colour, and the occupancy grid could never prune it.
+    """
+
+    def __init__(self, dataset, device, alpha=None):
+        self.images = torch.as_tensor(dataset.images, dtype=torch.float32, device=device)
+        self.background = torch.as_tensor(np.asarray(dataset.background), dtype=torch.float32,
+                                          device=device)
+        self.alpha = None if alpha is None else torch.as_tensor(
+            alpha, dtype=torch.float32, device=device).reshape(-1, 1)
+        self.N, self.H, self.W = self.images.shape[:3]
+        cams = dataset.cameras
+        self.K = torch.tensor([[c.fx, c.fy, c.cx, c.cy] for c in cams], dtype=torch.float32,
+                              device=device)
+        self.c2w = torch.tensor(np.stack([c.c2w[:3, :4] for c in cams]), dtype=torch.float32,
+                                device=device)
+
+    def sample(self, n: int, generator=None):
+        """(origins, dirs, rgb, background), each (n, 3), of ``n`` random pixels."""
+        dev = self.images.device
+        pix = torch.randint(self.N * self.H * self.W, (n,), device=dev, generator=generator)
+        o, d = self.rays(pix)
+        rgb = self.images.reshape(-1, 3)[pix]
+        if self.alpha is None:
+            return o, d, rgb, self.background.expand(n, 3)
+        a = self.alpha[pix]
+        bg = torch.rand(n, 3, device=dev, generator=generator)
+        return o, d, rgb + (1.0 - a) * (bg - self.background), bg
+
+    def rays(self, pix: torch.Tensor):
+        """(origins, dirs), each (n, 3), of flat pixel indices ``(image * H + y) * W + x``."""
+        i, y, x = pix // (self.H * self.W), (pix // self.W) % self.H, pix % self.W
+        K = self.K[i]
+        a = (x.float() + 0.5 - K[:, 2]) / K[:, 0]
+        b = -((y.float() + 0.5 - K[:, 3]) / K[:, 1])
+        local = torch.stack([a, b, -torch.ones_like(a)], -1)
+        d = (self.c2w[i, :, :3] @ local[..., None])[..., 0]
+        return self.c2w[i, :, 3], d / d.norm(dim=-1, keepdim=True)
+
+
+def schedule(step: int, tcfg: TrainConfig) -> tuple[float, float]:
+    """(lr, eta) at ``step`` (S2.4): LR linear warm-up then linear decay to 0; eta linear
+    warm-up over the first ``eta_warmup`` of training, then constant."""
+    n = tcfg.iterations
+    warm = max(1, int(round(tcfg.lr_warmup * n)))
+    lr = tcfg.lr * (step + 1) / warm if step < warm else tcfg.lr * max(0.0, (n - step) / max(1, n - warm))
+    eta = tcfg.eta * min(1.0, step / max(1.0, tcfg.eta_warmup * n))
+    return lr, eta
+
+
+def tune_gamma(gamma: float, n_bar: float, tcfg: TrainConfig) -> float:
+    """Eq. S3: grow gamma towards 1 while rays keep >= N_min samples, else shrink it."""
+    if n_bar >= tcfg.n_min:
+        return min(1.0, (1.0 + tcfg.kappa) * gamma)
+    return max(tcfg.gamma_min, (1.0 - tcfg.kappa) * gamma)
+
+
+def save_checkpoint(path: Path, model, opt, occ: OccupancyGrid, gamma: float, step: int):
+    """Atomic: written to a temporary file, then moved over ``path``."""
+    state = {"model": model.state_dict(), "optimizer": opt.state_dict(), "occ_ema": occ.ema,
+             "occ_binary": occ.binary, "gamma": float(gamma), "step": int(step)}
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, path)
+
+
+def load_run(run_dir, device=None):
+    """The trained model of a run folder.
+
+    Returns:
+        model (eval mode), occupancy (L_C,)*3 bool training occupancy, gamma (float),
+        config dict (``config.json``).
+    """
+    run_dir, dev = Path(run_dir), pick_device(device)
+    conf = json.loads((run_dir / "config.json").read_text())
+    cfg = ModelConfig.from_dict(conf["model"], where=str(run_dir / "config.json"))
+    state = torch.load(run_dir / "checkpoint.pt", map_location=dev, weights_only=True)
+    model = NGPRT(cfg).to(dev)
+    model.load_state_dict(state["model"])
+    model.eval()
+    return model, state["occ_binary"].to(dev), float(state["gamma"]), conf
+
+
+def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 2,
+          iterations: int | None = None, seed: int = 0, device=None,
+          train_config: TrainConfig | None = None, progress: bool = True) -> Path:
+    """Train an NGP-RT model on the dataset folder ``data`` (or a loaded Dataset) into the
+    run folder ``out``.
+
+    An existing checkpoint in ``out`` with the same config is resumed.
+    Returns the run folder.
+    """
+    dev, out = pick_device(device), Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(seed)
+    in_memory = hasattr(data, "images")
+    if not in_memory:
+        from ..data import load_dataset
+    ds = data if in_memory else load_dataset(data, split="train")
+    cfg = model_preset(preset, variant=variant, L=L, scene=ds.scene)
+    tcfg = train_config or TRAIN_PRESETS[preset]
+    if iterations is not None:
+        tcfg = replace(tcfg, iterations=int(iterations))
+    conf = {"model": cfg.to_dict(), "train": asdict(tcfg),
+            "data": None if in_memory else str(Path(data).resolve()), "preset": preset,
+            "seed": seed, "background": [float(v) for v in ds.background]}
+    conf = json.loads(json.dumps(conf))
+    model = NGPRT(cfg).to(dev)
+    opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas), eps=tcfg.eps)
+    occ, gamma, start = OccupancyGrid(cfg, dev), tcfg.gamma_init, 0
+    ckpt = out / "checkpoint.pt"
+    if ckpt.exists() and (out / "config.json").exists() \
+            and json.loads((out / "config.json").read_text()) == conf:
+        state = torch.load(ckpt, map_location=dev, weights_only=True)
+        model.load_state_dict(state["model"])
+        opt.load_state_dict(state["optimizer"])
+        occ.ema, occ.binary = state["occ_ema"].to(dev), state["occ_binary"].to(dev)
+        gamma, start = float(state["gamma"]), int(state["step"])
+    (out / "config.json").write_text(json.dumps(conf, indent=2))
+    _loop(model, opt, occ, gamma, start, RaySampler(ds, dev, getattr(ds, "alpha", None)), tcfg, out, progress)
+    return out
+
+
+def _loop(model, opt, occ, gamma, start, sampler, tcfg, out, progress):
+    from tqdm import tqdm
+
+    dev = sampler.images.device
+    n_rays, t0 = min(tcfg.max_rays, 1024), time.time()
+    bar = tqdm(range(start, tcfg.iterations), initial=start, total=tcfg.iterations,
+               disable=not progress, desc="train", dynamic_ncols=True)
+    with open(out / "log.jsonl", "a" if start else "w") as log:
+        for step in bar:
+            if step % tcfg.occ_every == 0:
+                occ.update(model, step, tcfg.occ_warmup, tcfg.occ_fraction, tcfg.occ_decay,
+                           tcfg.occ_threshold)
+            lr, eta = schedule(step, tcfg)
+            for g in opt.param_groups:
+                g["lr"] = lr
+            o, d, target, bg = sampler.sample(n_rays)
+            r = render_rays(model, o, d, occ.binary, gamma, bg)
+            s = float(torch.tensor(gamma * model.cfg.s0, dtype=torch.float32))
+            dist = ops.distortion_loss(r["weights"], r["k"], s, r["ray_ids"], n_rays)
+            colour = F.huber_loss(r["rgb"], target, delta=tcfg.huber_delta)
+            loss = colour + eta * dist.mean()
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            n_samples, hit = len(r["ray_ids"]), int((r["n_occ"] > 0).sum())
+            # Rays that cross only empty space (background) carry no samples at any step
+            # size, so the average of Eq. S3 is taken over the rays that have samples.
+            n_bar = n_samples / max(1, hit)
+            gamma = tune_gamma(gamma, n_bar, tcfg)
+            n_rays = int(min(tcfg.max_rays, max(64, n_rays * tcfg.target_samples / max(1, n_samples))))
+            mse = float(F.mse_loss(r["rgb"].detach(), target))
+            psnr = -10.0 * math.log10(max(mse, 1e-10))
+            bar.set_postfix(loss=f"{float(loss.detach()):.4f}", psnr=f"{psnr:.2f}", gamma=f"{gamma:.3f}",
+                            spr=f"{n_bar:.1f}")
+            if step % tcfg.log_every == 0 or step == tcfg.iterations - 1:
+                log.write(json.dumps({"step": step, "loss": float(loss.detach()), "psnr": psnr,
+                                      "gamma": gamma, "samples_per_ray": n_bar,
+                                      "rays": len(o), "samples": n_samples, "eta": eta,
+                                      "lr": lr, "occupied": float(occ.binary.float().mean()),
+                                      "seconds": time.time() - t0}) + "\n")
+                log.flush()
+            if (step + 1) % tcfg.checkpoint_every == 0 or step == tcfg.iterations - 1:
+                save_checkpoint(out / "checkpoint.pt", model, opt, occ, gamma, step + 1)

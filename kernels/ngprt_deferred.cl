@@ -1,0 +1,147 @@
+/* NGP-RT deferred shading (docs/ngprt.md "Per pixel", Eq. 5): per pixel the MLP_psi
+ *   x = [diffuse (3), specular (4), sh4(d) (16)]                         (23)
+ *   h1 = relu(x @ w0 + b0), h2 = relu(h1 @ w1 + b1)                      (64, 64)
+ *   rgb = sigmoid(diffuse + h2 @ w2 + b2) * opacity + background * (1 - opacity)
+ * Mirrors clrender/ngprt/render_ref.py:deferred_reference.
+ *
+ * Each work-item shades DEFERRED_VEC consecutive pixels held in the lanes of a vector
+ * (-D DEFERRED_VEC = 1, 2, 4, 8 or 16), so the 5.8 k multiply-adds per pixel run as
+ * SIMD on CPU devices without relying on the driver to vectorise across work-items;
+ * the weights are read once per work-item and broadcast. Plain a * b + c: mad()/fma()
+ * are several times slower on PoCL (DESIGN.md, performance notes).
+ *
+ * params: [w0 (23, 64), b0 (64), w1 (64, 64), b1 (64), w2 (64, 3), b2 (3)] float32.
+ */
+#include "camera.h"
+#pragma OPENCL FP_CONTRACT OFF
+
+#define IN 23
+#define HID 64
+#define P_W0 0
+#define P_B0 (P_W0 + IN * HID)
+#define P_W1 (P_B0 + HID)
+#define P_B1 (P_W1 + HID * HID)
+#define P_W2 (P_B1 + HID)
+#define P_B2 (P_W2 + HID * 3)
+
+#if DEFERRED_VEC == 1
+typedef float vfloat;
+#elif DEFERRED_VEC == 2
+typedef float2 vfloat;
+#elif DEFERRED_VEC == 4
+typedef float4 vfloat;
+#elif DEFERRED_VEC == 8
+typedef float8 vfloat;
+#elif DEFERRED_VEC == 16
+typedef float16 vfloat;
+#else
+#error "DEFERRED_VEC must be 1, 2, 4, 8 or 16"
+#endif
+
+#define LANE(v, lane) (((float *)&(v))[lane])
+
+/* Degree-4 real SH of a unit direction (encoding.sh4, same constants and order). */
+inline void ngp_sh4(float3 d, float *out)
+{
+    const float x = d.x, y = d.y, z = d.z;
+    const float xy = x * y, xz = x * z, yz = y * z;
+    const float x2 = x * x, y2 = y * y, z2 = z * z;
+    out[0] = 0.28209479177387814f;
+    out[1] = -0.48860251190291987f * y;
+    out[2] = 0.48860251190291987f * z;
+    out[3] = -0.48860251190291987f * x;
+    out[4] = 1.0925484305920792f * xy;
+    out[5] = -1.0925484305920792f * yz;
+    out[6] = 0.94617469575755997f * z2 - 0.31539156525251999f;
+    out[7] = -1.0925484305920792f * xz;
+    out[8] = 0.54627421529603959f * x2 - 0.54627421529603959f * y2;
+    out[9] = 0.59004358992664352f * y * (-3.0f * x2 + y2);
+    out[10] = 2.8906114426405538f * xy * z;
+    out[11] = 0.45704579946446572f * y * (1.0f - 5.0f * z2);
+    out[12] = 0.3731763325901154f * z * (5.0f * z2 - 3.0f);
+    out[13] = 0.45704579946446572f * x * (1.0f - 5.0f * z2);
+    out[14] = 1.4453057213202769f * z * (x2 - y2);
+    out[15] = 0.59004358992664352f * x * (-x2 + 3.0f * y2);
+}
+
+/* max(x, 0) per lane; a select rather than fmax, which PoCL calls out of line. */
+inline vfloat ngp_relu(vfloat x)
+{
+    return x > 0.0f ? x : (vfloat)(0.0f);
+}
+
+/* out[j] = relu(sum_i in[i] * w[i, j] + b[j]) for j < HID; four outputs per pass so
+ * each input vector is loaded once for four broadcast weights. */
+inline void ngp_dense_relu(const vfloat *in, int n_in, __global const float *w,
+                           __global const float *b, vfloat *out)
+{
+    for (int j = 0; j < HID; j += 4) {
+        vfloat a0 = 0.0f, a1 = 0.0f, a2 = 0.0f, a3 = 0.0f;
+        for (int i = 0; i < n_in; ++i) {
+            const vfloat x = in[i];
+            __global const float *wi = w + i * HID + j;
+            a0 = a0 + x * wi[0];
+            a1 = a1 + x * wi[1];
+            a2 = a2 + x * wi[2];
+            a3 = a3 + x * wi[3];
+        }
+        out[j] = ngp_relu(a0 + b[j]);
+        out[j + 1] = ngp_relu(a1 + b[j + 1]);
+        out[j + 2] = ngp_relu(a2 + b[j + 2]);
+        out[j + 3] = ngp_relu(a3 + b[j + 3]);
+    }
+}
+
+/* Gathers the inputs x (23 lanes-vectors) and the opacity of pixels p0 .. p0+VEC-1;
+ * lanes past the image get zeros. */
+inline void ngp_load_inputs(__global const float *cam, int width, int n_pix, int p0,
+                            __global const float *feat, vfloat *x, vfloat *opacity)
+{
+    for (int lane = 0; lane < DEFERRED_VEC; ++lane) {
+        const int p = p0 + lane;
+        float8 f = (float8)(0.0f);
+        float sh[16];
+        for (int i = 0; i < 16; ++i) sh[i] = 0.0f;
+        if (p < n_pix) {
+            f = vload8(p, feat);
+            ngp_sh4(camera_ray_dir(cam, p % width, p / width), sh);
+        }
+        const float *fv = (const float *)&f;
+        for (int i = 0; i < 7; ++i) LANE(x[i], lane) = fv[i];
+        for (int i = 0; i < 16; ++i) LANE(x[7 + i], lane) = sh[i];
+        LANE(*opacity, lane) = f.s7;
+    }
+}
+
+__kernel void ngprt_deferred(__global const float *cam, const int width, const int n_pix,
+                             __global const float *feat, __global const float *params,
+                             const float bg_r, const float bg_g, const float bg_b,
+                             __global float *rgb)
+{
+    const int p0 = (int)get_global_id(0) * DEFERRED_VEC;
+    if (p0 >= n_pix) return;
+    vfloat x[IN], h1[HID], h2[HID], opacity;
+    ngp_load_inputs(cam, width, n_pix, p0, feat, x, &opacity);
+    ngp_dense_relu(x, IN, params + P_W0, params + P_B0, h1);
+    ngp_dense_relu(h1, HID, params + P_W1, params + P_B1, h2);
+    __global const float *w2 = params + P_W2, *b2 = params + P_B2;
+    vfloat o0 = 0.0f, o1 = 0.0f, o2 = 0.0f;
+    for (int i = 0; i < HID; ++i) {
+        o0 = o0 + h2[i] * w2[3 * i];
+        o1 = o1 + h2[i] * w2[3 * i + 1];
+        o2 = o2 + h2[i] * w2[3 * i + 2];
+    }
+    const vfloat c0 = 1.0f / (1.0f + exp(-(x[0] + o0 + b2[0])));
+    const vfloat c1 = 1.0f / (1.0f + exp(-(x[1] + o1 + b2[1])));
+    const vfloat c2 = 1.0f / (1.0f + exp(-(x[2] + o2 + b2[2])));
+    const vfloat transparent = 1.0f - opacity;
+    const vfloat r = c0 * opacity + bg_r * transparent;
+    const vfloat g = c1 * opacity + bg_g * transparent;
+    const vfloat b = c2 * opacity + bg_b * transparent;
+    for (int lane = 0; lane < DEFERRED_VEC && p0 + lane < n_pix; ++lane) {
+        const int p = p0 + lane;
+        rgb[3 * p] = LANE(r, lane);
+        rgb[3 * p + 1] = LANE(g, lane);
+        rgb[3 * p + 2] = LANE(b, lane);
+    }
+}

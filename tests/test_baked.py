@@ -1,0 +1,218 @@
+"""Baked NGP-RT file: round trip, rejection of malformed files, occupancy structures."""
+import itertools
+import json
+
+import numpy as np
+import pytest
+
+from clrender.ngprt.baked import (FORMAT, VERSION, BakedFormatError, BakedModel, build_distance_grid,
+                                  build_mip, load_baked, save_baked, sparse_coarse_grid, validate)
+from clrender.ngprt.config import SCENES, VARIANTS, preset
+from clrender.ngprt.random_model import random_baked_model
+
+
+def small(**kw):
+    return preset("tiny", **{"L_C": 16, "G_res": 8, "log2_T": 10, **kw})
+
+
+@pytest.fixture(scope="module")
+def model():
+    return random_baked_model(small(variant="separate-v"), seed=1, gamma=1.25)
+
+
+def write_raw(path, arrays, manifest=None, **manifest_overrides):
+    """An .npz written without validation, manifest listing ``arrays`` unless given."""
+    if manifest is None:
+        manifest = {"format": FORMAT, "version": VERSION, "config": small().to_dict(),
+                    "gamma": 1.0,
+                    "arrays": {n: {"shape": list(a.shape), "dtype": str(a.dtype)}
+                               for n, a in arrays.items()}}
+    manifest.update(manifest_overrides)
+    np.savez(path, manifest=np.array(json.dumps(manifest)), **arrays)
+    return path
+
+
+def raw_from(model):
+    arrays = {n: a.copy() for n, a in model.arrays.items()}
+    manifest = {"format": FORMAT, "version": VERSION, "config": model.config.to_dict(),
+                "gamma": model.gamma}
+    return arrays, manifest
+
+
+def listing(arrays):
+    return {n: {"shape": list(a.shape), "dtype": str(a.dtype)} for n, a in arrays.items()}
+
+
+def test_round_trip(model, tmp_path):
+    path = save_baked(model, tmp_path / "m.npz")
+    assert path == tmp_path / "m.npz" and not list(tmp_path.glob("*.tmp"))
+    back = load_baked(path)
+    assert back.config == model.config and back.gamma == model.gamma
+    assert back.step == model.step == float(np.float32(1.25 * model.config.s0))
+    assert set(back.arrays) == set(model.arrays)
+    for name, a in model.arrays.items():
+        assert back.arrays[name].dtype == a.dtype and np.array_equal(back.arrays[name], a), name
+    assert [m.shape[0] for m in back.occupancy_mip()] == [16, 8, 4, 2, 1]
+
+
+def _corrupt(arrays, manifest, case):
+    """Apply one corruption; returns the expected message fragment."""
+    if case == "wrong dtype":
+        arrays["fine_tables"] = arrays["fine_tables"].astype(np.float64)
+        return "fine_tables has dtype float64, expected float32"
+    if case == "nan":
+        arrays["coarse_blocks"][0, 1, 2, 3, 0] = np.nan
+        return "coarse_blocks has 1 non-finite"
+    if case == "block index out of range":
+        idx = arrays["coarse_block_index"]
+        idx[tuple(np.argwhere(idx >= 0)[0])] = arrays["coarse_blocks"].shape[0]
+        return "coarse_block_index has values in"
+    if case == "unknown version":
+        manifest["version"] = 2
+        return "unknown version 2"
+    if case == "wrong format name":
+        manifest["format"] = "something-else"
+        return "format is 'something-else'"
+    if case == "missing array":
+        del arrays["G"]
+        return "missing arrays ['G']"
+    if case == "wrong shape":
+        arrays["fine_tables"] = arrays["fine_tables"][..., :7].copy()
+        return "fine_tables has shape (2, 1024, 7), expected (2, 1024, 8)"
+    if case == "extra array":
+        arrays["attention_inv"] = np.zeros(4, np.float32)
+        return "unexpected arrays ['attention_inv']"
+    if case == "mip inconsistent":
+        arrays["occupancy_2"][:] = 0
+        return "occupancy_2 is not the 2x max-pool"
+    if case == "G not conservative":
+        arrays["G"][:] = 3
+        return "G is not conservative"
+    if case == "bad config":
+        manifest["config"] = dict(manifest["config"], L_C=17)
+        return "bad config"
+    raise AssertionError(case)
+
+
+CASES = ["wrong dtype", "nan", "block index out of range", "unknown version",
+         "wrong format name", "missing array", "wrong shape", "extra array",
+         "mip inconsistent", "G not conservative", "bad config"]
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_malformed_rejected(model, tmp_path, case):
+    arrays, manifest = raw_from(model)
+    fragment = _corrupt(arrays, manifest, case)
+    path = write_raw(tmp_path / f"bad_{case.replace(' ', '_')}.npz", arrays,
+                     dict(manifest, arrays=listing(arrays)))
+    with pytest.raises(BakedFormatError) as err:
+        load_baked(path)
+    assert str(path) in str(err.value) and fragment in str(err.value), str(err.value)
+
+
+def test_truncated_and_not_an_archive(model, tmp_path):
+    path = save_baked(model, tmp_path / "cut.npz")
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(BakedFormatError, match=r"cut\.npz: not a readable \.npz archive"):
+        load_baked(path)
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"definitely not a zip file" * 10)
+    with pytest.raises(BakedFormatError, match=r"junk\.npz: not a readable"):
+        load_baked(junk)
+
+
+def test_manifest_problems(model, tmp_path):
+    arrays, manifest = raw_from(model)
+    path = tmp_path / "nomanifest.npz"
+    np.savez(path, **arrays)
+    with pytest.raises(BakedFormatError, match=r"nomanifest\.npz: no 'manifest' entry"):
+        load_baked(path)
+    path = tmp_path / "badjson.npz"
+    np.savez(path, manifest=np.array("{not json"), **arrays)
+    with pytest.raises(BakedFormatError, match=r"badjson\.npz: manifest is not valid JSON"):
+        load_baked(path)
+    path = write_raw(tmp_path / "listing.npz", arrays, dict(manifest, arrays={}))
+    with pytest.raises(BakedFormatError, match=r"listing\.npz: manifest lists arrays"):
+        load_baked(path)
+
+
+def test_validate_model_level_checks(model):
+    bad = BakedModel(model.config, 0.0, model.arrays)
+    with pytest.raises(BakedFormatError, match="gamma must be finite and > 0"):
+        validate(bad, "m")
+    arrays = dict(model.arrays)
+    idx = arrays["coarse_block_index"].copy()
+    idx[tuple(np.argwhere(idx >= 0)[0])] = -1       # an occupied block goes missing
+    arrays["coarse_block_index"] = idx
+    with pytest.raises(BakedFormatError, match="exactly once"):
+        validate(BakedModel(model.config, 1.0, arrays), "m")
+    with pytest.raises(BakedFormatError):
+        save_baked(bad, "/nonexistent-dir-is-never-reached/x.npz")
+
+
+def test_build_mip():
+    rng = np.random.default_rng(0)
+    occ = (rng.random((32, 32, 32)) < 0.002).astype(np.uint8)
+    mip = build_mip(occ)
+    assert [m.shape for m in mip] == [(32,) * 3, (16,) * 3, (8,) * 3, (4,) * 3, (2,) * 3]
+    for lev in range(1, 5):
+        f = 1 << lev
+        for i in itertools.product(range(32 >> lev), repeat=3):
+            block = occ[i[0] * f:(i[0] + 1) * f, i[1] * f:(i[1] + 1) * f, i[2] * f:(i[2] + 1) * f]
+            assert mip[lev][i] == block.max()
+
+
+@pytest.mark.parametrize("G_res", [8, 16])
+def test_distance_grid_is_box_distance(G_res):
+    """Brute force: G is the rounded-down box-to-box distance to the nearest occupied
+    G-voxel, so no occupied voxel (as a closed box) is closer than G to any voxel."""
+    rng = np.random.default_rng(G_res)
+    occ = (rng.random((16, 16, 16)) < 0.004).astype(np.uint8)
+    G = build_distance_grid(occ, G_res)
+    f = 16 // G_res
+    occ_g = occ.reshape(G_res, f, G_res, f, G_res, f).max(axis=(1, 3, 5))
+    vox = np.argwhere(np.ones((G_res,) * 3, bool))
+    occupied = np.argwhere(occ_g)
+    gap = np.maximum(np.abs(vox[:, None, :] - occupied[None, :, :]) - 1, 0)
+    box_dist = np.sqrt((gap ** 2).sum(-1)).min(axis=1)      # G-voxel units
+    np.testing.assert_array_equal(G.reshape(-1), np.minimum(np.floor(box_dist), 255))
+    assert np.all(G[occ_g > 0] == 0) and G.max() >= 1
+    assert np.all(build_distance_grid(np.zeros_like(occ), G_res) == 255)
+
+
+def test_sparse_coarse_grid_dense_and_callable_agree():
+    rng = np.random.default_rng(3)
+    occ = (rng.random((16, 16, 16)) < 0.01).astype(np.uint8)
+    dense = rng.normal(size=(17, 17, 17, 5)).astype(np.float32)
+    idx_a, blocks_a = sparse_coarse_grid(dense, occ, 4)
+    idx_b, blocks_b = sparse_coarse_grid(lambda c: dense[c[:, 0], c[:, 1], c[:, 2]], occ, 4)
+    assert np.array_equal(idx_a, idx_b) and np.array_equal(blocks_a, blocks_b)
+    for i in np.argwhere(occ):                      # corner i + c of the block of cell i
+        b = idx_a[tuple(i // 4)]
+        assert b >= 0
+        for c in itertools.product((0, 1), repeat=3):
+            j = i % 4 + c
+            assert np.array_equal(blocks_a[b, j[0], j[1], j[2]], dense[tuple(i + c)])
+    idx0, blocks0 = sparse_coarse_grid(lambda c: 1 / 0, np.zeros_like(occ), 4, channels=5)
+    assert np.all(idx0 == -1) and blocks0.shape == (0, 5, 5, 5, 5)
+
+
+@pytest.mark.parametrize("scene", SCENES)
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_random_models_validate(variant, scene):
+    cfg = small(variant=variant, scene=scene, L=3)
+    m = random_baked_model(cfg, seed=5)
+    validate(m)
+    occ = m.arrays["occupancy_0"]
+    assert 0.005 < occ.mean() < 0.5 and m.arrays["G"].max() >= 1
+    if scene == "unbounded":       # content in the contracted outer shell |c|_inf in (1, 2)
+        c = (np.argwhere(occ) + 0.5) / 16 * 4 - 2
+        assert np.any(np.abs(c).max(axis=1) > 1.0)
+
+
+def test_random_model_deterministic():
+    a, b = (random_baked_model(small(), seed=7) for _ in range(2))
+    c = random_baked_model(small(), seed=8)
+    assert all(np.array_equal(a.arrays[n], b.arrays[n]) for n in a.arrays)
+    assert not np.array_equal(a.arrays["occupancy_0"], c.arrays["occupancy_0"])

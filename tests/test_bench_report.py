@@ -1,0 +1,58 @@
+"""Ablation specs and the benchmark report writer (no training: measured values given)."""
+import json
+
+import numpy as np
+import pytest
+
+from bench import ablation, report
+
+
+@pytest.mark.parametrize("key", ["table2", "table3", "table4"])
+def test_tables_load(key):
+    t = ablation.load_table(key)
+    assert t.rows and t.scene == "builtin-bounded" and t.preset == "cpu"
+    assert all(set(r.paper) <= set(t.paper_columns) for r in t.rows)
+
+
+def test_table4_rows_pair_G_off_and_on():
+    t = ablation.load_table("table4")
+    assert [(r.L, r.use_G) for r in t.rows] == [(L, g) for L in (2, 3, 4) for g in (False, True)]
+
+
+def test_unknown_table_lists_the_known_ones():
+    with pytest.raises(ValueError, match="table4"):
+        ablation.load_table("table9")
+
+
+def _measured(psnr, ms):
+    return {"PSNR": psnr, "SSIM": 0.8, "time": {"median": ms, "p10": ms - 1, "p90": ms + 1,
+                                                "min": ms - 1, "n": 10},
+            "wall_ms": ms + 2, "Marching": 40.0, "Occupied": 12.5, "size_MB": 3.0,
+            "train_minutes": 1.5, "model_key": "abc", "sample": np.full((4, 4, 3), 0.5, np.float32)}
+
+
+def test_write_table_puts_paper_figures_beside_ours(tmp_path):
+    t = ablation.load_table("table4")
+    results = [_measured(20.0 + i, 10.0 + i) for i in range(len(t.rows))]
+    meta = {"device": "dev", "preset": "cpu", "scene": "builtin-bounded", "resolution": "4x4",
+            "git_revision": "r", "date": "d"}
+    md = report.write_table(tmp_path, t, results, meta)
+    line = next(l for l in md.splitlines() if l.startswith("| L=2 w/o G"))
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert cells[1:3] == ["20.00", "25.67"]          # PSNR ours, paper
+    assert cells[3:5] == ["40.0", "85.1"]            # Marching ours, paper
+    data = json.loads((tmp_path / "table4.json").read_text())
+    assert data["device"] == "dev" and len(data["rows"]) == 6
+    assert (tmp_path / "table4.csv").read_text().count("\n") == 7
+    assert (tmp_path / "table4.png").stat().st_size > 1000
+    assert (tmp_path / "table4" / "l-2-w-o-g.png").is_file()
+    report.write_index(tmp_path, [t], meta)
+    assert "table4/l-2-w-g.png" in (tmp_path / "README.md").read_text()
+
+
+def test_lpips_is_reported_as_not_measured(tmp_path):
+    t = ablation.load_table("table2")
+    meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4"}
+    md = report.markdown(t, [_measured(25.0, 5.0)] * 3, meta)
+    row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
+    assert "| n/a | 0.299 |" in row
