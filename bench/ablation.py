@@ -24,6 +24,7 @@ class Row:
     L: int
     use_G: bool
     paper: dict = field(default_factory=dict)
+    baseline: str | None = None     # name of the row this row's speed-up is measured against
 
 
 @dataclass(frozen=True)
@@ -64,7 +65,12 @@ def load_table(key: str) -> Table:
         if unknown:
             raise ValueError(f"{path}: row {i} has paper figures for unknown columns {sorted(unknown)}")
         rows.append(Row(name=r["name"], variant=r["variant"], L=r["L"],
-                        use_G=bool(r.get("use_G", True)), paper=dict(r.get("paper", {}))))
+                        use_G=bool(r.get("use_G", True)), paper=dict(r.get("paper", {})),
+                        baseline=r.get("baseline", spec.get("baseline"))))
+    names = {r.name for r in rows}
+    for r in rows:
+        if r.baseline is not None and r.baseline not in names:
+            raise ValueError(f"{path}: row {r.name!r} has unknown baseline {r.baseline!r}")
     return Table(key=key, title=spec["title"], paper_source=spec["paper_source"],
                  scene=spec["scene"], preset=spec["preset"],
                  paper_columns=tuple(spec["paper_columns"]), rows=tuple(rows))

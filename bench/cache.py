@@ -74,10 +74,10 @@ def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, variant:
     """Train (if missing) and bake (if missing) the model of one table row."""
     from clrender.ngprt.bake import bake_run
     from clrender.ngprt.config import preset as model_preset
-    from clrender.ngprt.train import train, train_preset
+    from clrender.ngprt.train import TRAIN_PRESETS, train
 
     spec = {"model": model_preset(preset, variant=variant, L=L).to_dict(),
-            "train": asdict(train_preset(preset)), "data": fingerprint, "seed": seed}
+            "train": asdict(TRAIN_PRESETS[preset]), "data": fingerprint, "seed": seed}
     key = _model_key(spec)
     folder = root / "models" / key
     meta_path, baked = folder / "meta.json", folder / "model.npz"

@@ -40,27 +40,51 @@ def _fmt(col: str, value) -> str:
     return "n/a" if value is None else FORMAT.get(col, "{:.3g}").format(value)
 
 
+def speedups(table, results: list[dict], key=lambda row, m: m["time"]["median"]) -> list:
+    """Per row: baseline time / this row's time (>1 = faster), None without a baseline.
+
+    ``key(row, m)`` gives a row's time: ours by default; the paper's with
+    ``key=lambda row, m: row.paper.get("Time (ms)")`` (None where the paper has none).
+    """
+    times = {row.name: key(row, m) for row, m in zip(table.rows, results)}
+    out = []
+    for row in table.rows:
+        base, mine = times.get(row.baseline), times[row.name]
+        out.append(None if row.baseline is None or base is None or mine is None
+                   else base / mine)
+    return out
+
+
 def markdown(table, results: list[dict], meta: dict) -> str:
     """The table with each paper column as "ours" and "paper" sub-columns."""
     extra = [c for c in ("Marching", "Occupied") if c not in table.paper_columns]
     head = ["Row"]
     for col in table.paper_columns:
         head += [col, f"{col} (paper)"]
+    ratios = any(r.baseline for r in table.rows)
+    if ratios:
+        head += ["Speed-up", "Speed-up (paper)"]
     head += extra + ["Time p10-p90 (ms)", "Size (MB)", "Train (min)"]
+    ours_x = speedups(table, results)
+    paper_x = speedups(table, results, key=lambda row, m: row.paper.get("Time (ms)"))
     lines = [f"## {table.title}", "",
              f"Ours: {meta['scene']} scene, `{meta['preset']}` preset, {meta['device']}, "
              f"test views at {meta['resolution']}. Paper: {table.paper_source}.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for row, m in zip(table.rows, results):
+    for row, m, ox, px in zip(table.rows, results, ours_x, paper_x):
         cells = [row.name]
         for col in table.paper_columns:
             cells += [_fmt(col, OURS[col](m)), _fmt(col, row.paper.get(col))]
+        if ratios:
+            cells += ["" if ox is None else f"{ox:.2f}x", "" if px is None else f"{px:.2f}x"]
         cells += [_fmt(c, OURS[c](m)) for c in extra]
         cells += [f"{m['time']['p10']:.1f}-{m['time']['p90']:.1f}", f"{m['size_MB']:.1f}",
                   f"{m['train_minutes']:.1f}"]
         lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "Time: OpenCL kernel time per frame (ray marching + deferred MLP), median of "
-              f"{results[0]['time']['n']} timed frames. LPIPS needs pretrained network weights that "
+              f"{results[0]['time']['n']} timed frames. Speed-up: the baseline row's time "
+              "(" + (", ".join(sorted({r.baseline for r in table.rows if r.baseline})) or "none")
+              + ") over this row's, measured in the same run. LPIPS needs pretrained network weights that "
               "cannot be downloaded here, so it is not measured.", ""]
     return "\n".join(lines)
 
@@ -96,7 +120,7 @@ def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
     md = markdown(table, results, meta)
     _write(out_dir / f"{table.key}.md", md)
     records = []
-    for row, m in zip(table.rows, results):
+    for row, m, ox in zip(table.rows, results, speedups(table, results)):
         sample = out_dir / table.key / f"{slug(row.name)}.png"
         _write(sample, iio.imwrite("<bytes>", (np.clip(m["sample"], 0, 1) * 255 + 0.5)
                                    .astype(np.uint8), extension=".png"))
@@ -105,6 +129,7 @@ def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
                "FPS": 1000.0 / m["time"]["median"], "Marching": m["Marching"],
                "Occupied": m["Occupied"], "size_MB": m["size_MB"],
                "train_minutes": m["train_minutes"], "model_key": m["model_key"],
+               "baseline": row.baseline, "speedup": ox,
                "sample": str(sample.relative_to(out_dir)),
                "paper": row.paper}
         records.append(rec)

@@ -56,3 +56,29 @@ def test_lpips_is_reported_as_not_measured(tmp_path):
     md = report.markdown(t, [_measured(25.0, 5.0)] * 3, meta)
     row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
     assert "| n/a | 0.299 |" in row
+
+
+def test_speedup_is_baseline_time_over_row_time(tmp_path):
+    t = ablation.load_table("table4")
+    # w/o G rows take 12 ms, w/ G rows 10 ms: the w/ G rows are 1.2x faster.
+    results = [_measured(20.0, 12.0 if not r.use_G else 10.0) for r in t.rows]
+    assert report.speedups(t, results) == [None, 1.2, None, 1.2, None, 1.2]
+    paper = report.speedups(t, results, key=lambda row, m: row.paper.get("Time (ms)"))
+    assert paper[1] == pytest.approx(9.98 / 9.26)
+    meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4",
+            "git_revision": "r", "date": "d"}
+    md = report.write_table(tmp_path, t, results, meta)
+    row = next(l for l in md.splitlines() if l.startswith("| L=3 w/ G"))
+    assert "| 1.20x | 1.11x |" in row
+    data = json.loads((tmp_path / "table4.json").read_text())
+    assert data["rows"][1]["baseline"] == "L=2 w/o G" and data["rows"][1]["speedup"] == 1.2
+
+
+def test_unknown_baseline_is_an_error(tmp_path, monkeypatch):
+    (tmp_path / "bad.toml").write_text(
+        'title = "t"\npaper_source = "p"\nscene = "builtin-bounded"\npreset = "cpu"\n'
+        'paper_columns = ["PSNR"]\nbaseline = "nope"\n'
+        '[[rows]]\nname = "a"\nvariant = "sum"\nL = 2\n')
+    monkeypatch.setattr(ablation, "ABLATIONS_DIR", tmp_path)
+    with pytest.raises(ValueError, match="unknown baseline 'nope'"):
+        ablation.load_table("bad")
