@@ -106,9 +106,12 @@ def render_path(model_path, out, path: str = "orbit", frames: int = 60, width: i
         from .ngprt.baked import load_baked
 
         model = load_baked(model_path)
+    out = Path(out)
+    if out.suffix.lower() == ".mp4" and (width % 2 or height % 2):
+        raise ValueError(f"{out}: an .mp4 (H.264, yuv420p) needs an even width and height, "
+                         f"got {width}x{height}")
     cameras = path_cameras(model.config.scene, path, frames, width, height, data)
     renderer = Renderer(model, device=device, use_G=use_G)
-    out = Path(out)
     frames_iter = (_to_uint8(renderer.render(c, background=background)["rgb"])
                    for c in tqdm(cameras, desc=f"render {path}", unit="frame"))
     if out.suffix.lower() in VIDEO_SUFFIXES:
@@ -129,7 +132,8 @@ def _write_video(out: Path, frames, fps: int) -> None:
     os.close(fd)
     try:
         if out.suffix.lower() == ".mp4":  # streamed to ffmpeg frame by frame
-            with imageio.get_writer(tmp, fps=fps) as writer:
+            # macro_block_size=2: keep the frame size (ffmpeg would pad it to 16s).
+            with imageio.get_writer(tmp, fps=fps, macro_block_size=2) as writer:
                 for frame in frames:
                     writer.append_data(frame)
         else:  # Pillow's GIF writer: duration per frame in milliseconds

@@ -256,3 +256,32 @@ def test_every_variant_bakes_and_renders_like_torch(tiny_run, tmp_path, variant)
     ref = render_image(model, cam, occ0, baked.gamma, step=baked.step)["rgb"]
     got = Renderer(baked).render(cam)["rgb"]
     assert psnr(got, ref) >= 40.0
+
+
+@pytest.mark.slow
+def test_cli_and_api_from_run_to_video(tiny_run, tmp_path, capsys):
+    """The user path: `clrender bake`, `clrender eval`, `clrender render --out x.mp4`, and
+    `clrender.render(path, camera, stats=True)` on the same trained run."""
+    import imageio.v3 as iio
+
+    import clrender
+    from clrender import cli
+
+    model = tmp_path / "model.npz"
+    assert cli.main(["bake", str(tiny_run["run"]), "--out", str(model)]) == 0
+    assert cli.main(["eval", str(model), str(tiny_run["data"])]) == 0
+    assert "psnr" in capsys.readouterr().out.lower()
+    video = tmp_path / "orbit.mp4"
+    assert cli.main(["render", str(model), "--frames", "4", "--width", "32", "--height", "24",
+                     "--out", str(video)]) == 0
+    frames = iio.imread(video, index=None)
+    assert frames.shape[0] == 4 and frames.shape[1:3] == (24, 32) and frames.std() > 1.0
+    assert cli.main(["render", str(model), "--frames", "2", "--width", "33", "--height", "24",
+                     "--out", str(tmp_path / "odd.mp4")]) == 2
+    assert "even width and height, got 33x24" in capsys.readouterr().err
+    assert not (tmp_path / "odd.mp4").exists()
+    cam = tiny_run["test"].cameras[0]
+    rgb, stats = clrender.render(str(model), cam, stats=True)
+    assert rgb.shape == (cam.height, cam.width, 3) and rgb.dtype == np.float32
+    assert stats["n_occ"].sum() > 0 and np.all(stats["n_march"] >= stats["n_occ"])
+    np.testing.assert_array_equal(rgb, clrender.render(clrender.load(model), cam))
