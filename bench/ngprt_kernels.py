@@ -2,6 +2,7 @@
 
     python -m bench.ngprt_kernels                       # 400x400, `cpu` preset, 5 repeats
     python -m bench.ngprt_kernels --size 200 --repeats 3 --preset tiny --out results/
+    python -m bench.ngprt_kernels --L-C 256             # finer grids: G has more to skip
 
 For every aggregation variant, with and without the occupancy distance grid G, renders
 one orbit view and reports the march and deferred-MLP kernel times (OpenCL profiling
@@ -89,11 +90,12 @@ def markdown(rows: list[dict], meta: dict) -> str:
 
 
 def run(size: int, repeats: int, preset_name: str, scene: str, ref_size: int, out: Path,
-        device=None, seed: int = 0, gamma: float = 1.0) -> list[dict]:
+        device=None, seed: int = 0, gamma: float = 1.0, L_C: int | None = None) -> list[dict]:
     rows, refs = [], {}
     camera = _camera(scene, size)
+    grid = {} if L_C is None else {"L_C": L_C, "G_res": L_C // 2}   # G at L_C / 2 as in S2.5
     for variant in VARIANTS:
-        config = preset(preset_name, variant=variant, scene=scene)
+        config = preset(preset_name, variant=variant, scene=scene, **grid)
         model = random_baked_model(config, seed, gamma)
         for use_G in (True, False):
             m = measure(model, camera, use_G, repeats, device)
@@ -133,9 +135,11 @@ def main(argv=None) -> int:
                    help="frame size for timing the numpy reference (scaled by pixel count)")
     p.add_argument("--out", default="results", type=Path)
     p.add_argument("--device", default=None)
+    p.add_argument("--L-C", type=int, default=None,
+                   help="coarse grid resolution instead of the preset's (G_res = L_C / 2)")
     args = p.parse_args(argv)
     run(args.size, args.repeats, args.preset, args.scene, min(args.ref_size, args.size),
-        args.out, args.device)
+        args.out, args.device, L_C=args.L_C)
     return 0
 
 
