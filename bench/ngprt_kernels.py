@@ -17,10 +17,10 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import os
 import time
 from pathlib import Path
 
+from bench.report import write_atomic
 from clrender.device import get_runtime
 from clrender.metrics import summarize_ms
 from clrender.ngprt.config import VARIANTS, preset
@@ -28,13 +28,6 @@ from clrender.ngprt.random_model import random_baked_model
 from clrender.ngprt.render_cl import Renderer
 from clrender.ngprt.render_ref import render_reference
 from clrender.render_video import path_cameras
-
-
-def _write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def _camera(scene: str, size: int):
@@ -118,8 +111,8 @@ def run(size: int, repeats: int, preset_name: str, scene: str, ref_size: int, ou
                                       f"G_res={config.G_res}",
             "date": datetime.datetime.now().isoformat(timespec="seconds")}
     text = markdown(rows, meta)
-    _write(out / "ngprt_kernels.md", text)
-    _write(out / "ngprt_kernels.json", json.dumps({"meta": meta, "rows": rows}, indent=2))
+    write_atomic(out / "ngprt_kernels.md", text)
+    write_atomic(out / "ngprt_kernels.json", json.dumps({"meta": meta, "rows": rows}, indent=2))
     print(text)
     return rows
 

@@ -29,7 +29,8 @@ def slug(name: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
 
 
-def _write(path: Path, data: bytes | str) -> None:
+def write_atomic(path: Path, data: bytes | str) -> None:
+    """Write ``data`` to ``path`` through a temporary file and a rename (never half-written)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_bytes(data.encode() if isinstance(data, str) else data)
@@ -118,11 +119,11 @@ def _plot(table, results: list[dict]) -> bytes:
 def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
     """Write TABLE.md/.csv/.json/.png and one sample render per row; returns the Markdown."""
     md = markdown(table, results, meta)
-    _write(out_dir / f"{table.key}.md", md)
+    write_atomic(out_dir / f"{table.key}.md", md)
     records = []
     for row, m, ox in zip(table.rows, results, speedups(table, results)):
         sample = out_dir / table.key / f"{slug(row.name)}.png"
-        _write(sample, iio.imwrite("<bytes>", (np.clip(m["sample"], 0, 1) * 255 + 0.5)
+        write_atomic(sample, iio.imwrite("<bytes>", (np.clip(m["sample"], 0, 1) * 255 + 0.5)
                                    .astype(np.uint8), extension=".png"))
         rec = {"row": row.name, "variant": row.variant, "L": row.L, "use_G": row.use_G,
                "PSNR": m["PSNR"], "SSIM": m["SSIM"], "time_ms": m["time"], "wall_ms": m["wall_ms"],
@@ -133,7 +134,7 @@ def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
                "sample": str(sample.relative_to(out_dir)),
                "paper": row.paper}
         records.append(rec)
-    _write(out_dir / f"{table.key}.json", json.dumps({**meta, "table": table.key,
+    write_atomic(out_dir / f"{table.key}.json", json.dumps({**meta, "table": table.key,
                                                       "title": table.title,
                                                       "paper_source": table.paper_source,
                                                       "rows": records}, indent=2))
@@ -150,8 +151,8 @@ def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
                          f"{r['FPS']:.2f}", f"{r['Marching']:.2f}", f"{r['Occupied']:.2f}",
                          f"{r['size_MB']:.3f}", f"{r['train_minutes']:.2f}"]
                         + [r["paper"].get(c, "") for c in table.paper_columns])
-    _write(out_dir / f"{table.key}.csv", buf.getvalue())
-    _write(out_dir / f"{table.key}.png", _plot(table, results))
+    write_atomic(out_dir / f"{table.key}.csv", buf.getvalue())
+    write_atomic(out_dir / f"{table.key}.png", _plot(table, results))
     return md
 
 
@@ -165,4 +166,4 @@ def write_index(out_dir: Path, tables: list, meta: dict) -> None:
                   f"![quality vs time]({table.key}.png)", "",
                   " ".join(f"![{r.name}]({table.key}/{slug(r.name)}.png)" for r in table.rows),
                   "", " | ".join(r.name for r in table.rows), ""]
-    _write(out_dir / "README.md", "\n".join(lines))
+    write_atomic(out_dir / "README.md", "\n".join(lines))
