@@ -15,6 +15,8 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from clrender.atomic import write_atomic
+
 BUILTIN_SCENES = {"builtin-bounded": "bounded", "builtin-unbounded": "unbounded"}
 
 
@@ -88,9 +90,7 @@ def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, variant:
               device=torch_device)
         minutes = (time.perf_counter() - start) / 60.0
         bake_run(folder / "run", baked)
-        tmp = meta_path.with_suffix(".tmp")
-        tmp.write_text(json.dumps({"spec": spec, "train_minutes": minutes}, indent=2))
-        os.replace(tmp, meta_path)
+        write_atomic(meta_path, json.dumps({"spec": spec, "train_minutes": minutes}, indent=2))
     elif not baked.is_file():
         bake_run(folder / "run", baked)
     meta = json.loads(meta_path.read_text())

@@ -20,7 +20,7 @@ import json
 import time
 from pathlib import Path
 
-from bench.report import write_atomic
+from clrender.atomic import write_atomic
 from clrender.device import get_runtime
 from clrender.metrics import summarize_ms
 from clrender.ngprt.config import VARIANTS, preset

@@ -12,14 +12,13 @@ Examples:
 """
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from .atomic import atomic_write
 from .camera import Camera, orbit_path, spiral_path
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
@@ -61,24 +60,10 @@ def _to_uint8(rgb: np.ndarray) -> np.ndarray:
     return (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
-def _publish(tmp: str, path: Path) -> None:
-    """Atomically move a finished temporary file into place, readable like a normal file
-    (mkstemp creates it 0600)."""
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, path)
-
-
 def _write_png(path: Path, frame: np.ndarray) -> None:
     import imageio.v3 as iio
 
-    fd, tmp = tempfile.mkstemp(suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
-        iio.imwrite(tmp, frame)
-        _publish(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    atomic_write(path, lambda tmp: iio.imwrite(tmp, frame))
 
 
 def render_path(model_path, out, path: str = "orbit", frames: int = 60, width: int = 400,
@@ -127,10 +112,7 @@ def _write_video(out: Path, frames, fps: int) -> None:
     import imageio.v2 as imageio
     import imageio.v3 as iio
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=out.suffix, dir=out.parent)
-    os.close(fd)
-    try:
+    def write(tmp: Path) -> None:
         if out.suffix.lower() == ".mp4":  # streamed to ffmpeg frame by frame
             # macro_block_size=2: keep the frame size (ffmpeg would pad it to 16s).
             with imageio.get_writer(tmp, fps=fps, macro_block_size=2) as writer:
@@ -138,9 +120,5 @@ def _write_video(out: Path, frames, fps: int) -> None:
                     writer.append_data(frame)
         else:  # Pillow's GIF writer: duration per frame in milliseconds
             iio.imwrite(tmp, np.stack(list(frames)), duration=1000.0 / fps, loop=0)
-        _publish(tmp, out)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
+    atomic_write(out, write)

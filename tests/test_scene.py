@@ -1,7 +1,6 @@
 """Built-in scene generator: determinism, image content, loading back, scene bounds."""
 import json
 
-import imageio.v3 as iio
 import numpy as np
 import pytest
 

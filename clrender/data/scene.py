@@ -17,7 +17,6 @@ a seed gives the same bytes on every run.
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,6 +27,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 from tqdm import tqdm
 
+from ..atomic import atomic_write
 from ..camera import Camera, look_at
 
 F32 = np.float32
@@ -79,7 +79,7 @@ def make_scene(kind: str, out_dir, seed: int = 0, n_train: int = 100, n_test: in
         for i, c2w in enumerate(poses):
             rgba = _render(scene, Camera.from_fov(fov, width, height, c2w))
             img = rgba if kind == "bounded" else rgba[..., :3]
-            _replace(out / split / f"r_{i:03d}.png",
+            atomic_write(out / split / f"r_{i:03d}.png",
                      lambda f, img=img: iio.imwrite(f, img, extension=".png"))
             frames.append({"file_path": f"./{split}/r_{i:03d}",
                            "transform_matrix": np.round(c2w, 12).tolist()})
@@ -88,16 +88,9 @@ def make_scene(kind: str, out_dir, seed: int = 0, n_train: int = 100, n_test: in
                 "clrender": {"scene": kind, "scale": 1.0, "seed": seed}}
         text = json.dumps(meta, indent=2)
         for name in (split, "val") if split == "test" else (split,):
-            _replace(out / f"transforms_{name}.json", lambda f, t=text: Path(f).write_text(t))
+            atomic_write(out / f"transforms_{name}.json", lambda f, t=text: Path(f).write_text(t))
     bar.close()
     return out
-
-
-def _replace(path: Path, write) -> None:
-    """Call ``write(tmp)`` then atomically rename ``tmp`` to ``path``."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    write(tmp)
-    os.replace(tmp, path)
 
 
 def _poses(kind: str, rng, n: int, spread: bool) -> list[np.ndarray]:

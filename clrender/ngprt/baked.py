@@ -16,8 +16,6 @@ References: NGP-RT (Hu et al., ECCV 2024) §4.3, S2.5.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import zipfile
 import zlib
 from dataclasses import dataclass
@@ -26,6 +24,7 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import binary_dilation, distance_transform_edt
 
+from ..atomic import atomic_write
 from .config import DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM, ModelConfig
 
 FORMAT = "clrender-ngprt"
@@ -278,6 +277,11 @@ def _manifest(model: BakedModel) -> dict:
                        for n, a in sorted(model.arrays.items())}}
 
 
+def _savez(path: Path, payload: dict) -> None:
+    with open(path, "wb") as f:     # a file object: numpy adds no ".npz" to the name
+        np.savez_compressed(f, **payload)
+
+
 def save_baked(model: BakedModel, path) -> Path:
     """Validate ``model`` and write it to ``path`` atomically (temp file + rename).
 
@@ -288,16 +292,7 @@ def save_baked(model: BakedModel, path) -> Path:
     validate(model, str(path))
     payload = {n: np.ascontiguousarray(a) for n, a in model.arrays.items()}
     payload["manifest"] = np.array(json.dumps(_manifest(model)))
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent or ".")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **payload)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return atomic_write(path, lambda tmp: _savez(tmp, payload))
 
 
 _READ_ERRORS = (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, KeyError)

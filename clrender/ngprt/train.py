@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -24,6 +23,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from ..atomic import atomic_write
 from . import torch_ops as ops
 from .config import ModelConfig, preset as model_preset
 from .model import NGPRT, render_rays
@@ -206,9 +206,7 @@ def save_checkpoint(path: Path, model, opt, occ: OccupancyGrid, gamma: float, st
     """Atomic: written to a temporary file, then moved over ``path``."""
     state = {"model": model.state_dict(), "optimizer": opt.state_dict(), "occ_ema": occ.ema,
              "occ_binary": occ.binary, "gamma": float(gamma), "step": int(step)}
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(state, tmp)
-    os.replace(tmp, path)
+    atomic_write(path, lambda tmp: torch.save(state, tmp))
 
 
 def load_run(run_dir, device=None):
@@ -271,7 +269,6 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
 def _loop(model, opt, occ, gamma, start, sampler, tcfg, out, progress):
     from tqdm import tqdm
 
-    dev = sampler.images.device
     n_rays, t0 = min(tcfg.max_rays, 1024), time.time()
     bar = tqdm(range(start, tcfg.iterations), initial=start, total=tcfg.iterations,
                disable=not progress, desc="train", dynamic_ncols=True)
