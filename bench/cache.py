@@ -1,8 +1,9 @@
 """Cached scenes and trained/baked models for the benchmark harness.
 
-Models are keyed by a hash of everything that determines them (model config, training
-config, data fingerprint, seed), so tables that share a row configuration share a model
-(table2's L=4 row is table3's Separate-Att (V) row and table4's L=4 rows).
+Models are keyed by a hash of everything that determines them (the method's model and
+training config, data fingerprint, seed, teacher), so tables that share a row configuration
+share a model (table2's L=4 row is table3's Separate-Att (V) row and table4's L=4 rows; every
+NDRF row of a scene shares its NGP-RT teacher).
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from clrender import methods
 from clrender.atomic import write_atomic
 
 BUILTIN_SCENES = {"builtin-bounded": "bounded", "builtin-unbounded": "unbounded"}
@@ -71,27 +73,36 @@ def _model_key(spec: dict) -> str:
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, variant: str, L: int,
-                 seed: int = 0, torch_device: str | None = None) -> ModelEntry:
-    """Train (if missing) and bake (if missing) the model of one table row."""
-    from clrender.ngprt.bake import bake_run
-    from clrender.ngprt.config import preset as model_preset
-    from clrender.ngprt.train import TRAIN_PRESETS, train
+def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, method: str,
+                 options: dict, seed: int = 0, torch_device: str | None = None) -> ModelEntry:
+    """Train (if missing) and bake (if missing) the model of one table row.
 
-    spec = {"model": model_preset(preset, variant=variant, L=L).to_dict(),
-            "train": asdict(TRAIN_PRESETS[preset]), "data": fingerprint, "seed": seed}
+    Args:
+        method: the row's method; ``options`` its model options. An option ``teacher``
+            (a dict of NGP-RT model options) names a teacher that is ensured first (cached
+            like any model) and handed to the method's training as a baked file.
+    """
+    plugin = methods.get(method)
+    options = dict(options)
+    teacher = None
+    if "teacher" in options:
+        teacher = ensure_model(root, data, fingerprint, preset, "ngprt", options.pop("teacher"),
+                               seed=seed, torch_device=torch_device)
+    spec = {**plugin.model_spec(preset, **options), "data": fingerprint, "seed": seed}
+    if teacher is not None:
+        spec["teacher"] = teacher.key
     key = _model_key(spec)
     folder = root / "models" / key
     meta_path, baked = folder / "meta.json", folder / "model.npz"
     if not meta_path.is_file():
         folder.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter()
-        train(str(data), str(folder / "run"), preset=preset, variant=variant, L=L, seed=seed,
-              device=torch_device)
+        plugin.train_for_bench(data, folder / "run", preset, seed=seed, torch_device=torch_device,
+                               teacher=None if teacher is None else teacher.baked, **options)
         minutes = (time.perf_counter() - start) / 60.0
-        bake_run(folder / "run", baked)
+        plugin.bake_run(folder / "run", baked)
         write_atomic(meta_path, json.dumps({"spec": spec, "train_minutes": minutes}, indent=2))
     elif not baked.is_file():
-        bake_run(folder / "run", baked)
+        plugin.bake_run(folder / "run", baked)
     meta = json.loads(meta_path.read_text())
     return ModelEntry(key, baked, folder / "run", float(meta["train_minutes"]))

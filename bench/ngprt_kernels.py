@@ -27,7 +27,7 @@ from clrender.ngprt.config import VARIANTS, preset
 from clrender.ngprt.random_model import random_baked_model
 from clrender.ngprt.render_cl import Renderer
 from clrender.ngprt.render_ref import render_reference
-from clrender.render_video import path_cameras
+from clrender.paths import path_cameras
 
 
 def _camera(scene: str, size: int):
@@ -37,7 +37,7 @@ def _camera(scene: str, size: int):
 def measure(model, camera, use_G: bool, repeats: int, device=None) -> dict:
     """Kernel times (ms) and points per ray of one model/camera, G on or off."""
     renderer = Renderer(model, device=device, use_G=use_G)
-    out = renderer.render(camera)  # warm-up: first-touch of buffers, caches
+    stats = renderer.render(camera, stats=True)  # warm-up: first-touch of buffers, caches
     march, deferred = [], []
     for _ in range(repeats):
         out = renderer.render(camera)
@@ -45,8 +45,8 @@ def measure(model, camera, use_G: bool, repeats: int, device=None) -> dict:
         deferred.append(out["ms_deferred"])
     total = [a + b for a, b in zip(march, deferred)]
     return {"march": summarize_ms(march), "deferred": summarize_ms(deferred),
-            "total": summarize_ms(total), "marching": float(out["n_march"].mean()),
-            "occupied": float(out["n_occ"].mean()), "rgb": out["rgb"]}
+            "total": summarize_ms(total), "marching": float(stats["n_march"].mean()),
+            "occupied": float(stats["n_occ"].mean()), "rgb": out["rgb"]}
 
 
 def time_reference(model, camera, ref_size: int, size: int) -> dict:

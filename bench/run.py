@@ -1,4 +1,4 @@
-"""Reproduce NGP-RT's ablation tables on real renders.
+"""Reproduce the papers' tables (NGP-RT, NDRF) on real renders.
 
     python -m bench.run                     # table4, built-in bounded scene, `cpu` preset
     python -m bench.run table3 --preset tiny
@@ -20,6 +20,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from bench import ablation, cache, report
+from clrender import methods
 
 
 def _git_revision() -> str:
@@ -39,10 +40,10 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict) -> str:
     results = []
     for row in tqdm(table.rows, desc=table.key, unit="row"):
         entry = cache.ensure_model(args.cache, data, fingerprint, args.preset or table.preset,
-                                   row.variant, row.L, seed=args.seed,
+                                   row.method, row.model, seed=args.seed,
                                    torch_device=args.torch_device)
-        m = measure_row(entry.baked, test_set, row.use_G, device=args.device,
-                        repeats=args.repeats)
+        m = measure_row(entry.baked, test_set, row.render, device=args.device,
+                        repeats=args.repeats, timing_sizes=table.timing_sizes)
         m.update(train_minutes=entry.train_minutes, model_key=entry.key)
         results.append(m)
     cam = test_set.cameras[0]
@@ -55,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("table", nargs="?", default="table4", help="a table name, or `all`")
     p.add_argument("--list", action="store_true", help="list the tables and exit")
-    p.add_argument("--preset", choices=["tiny", "cpu", "paper"], default=None,
+    p.add_argument("--preset", choices=methods.all_presets(), default=None,
                    help="model/training preset (default: the table's, `cpu`)")
     p.add_argument("--scene", default=None,
                    help="builtin-bounded | builtin-unbounded | a dataset folder (default: the table's)")
@@ -73,7 +74,7 @@ def main(argv=None) -> int:
     if args.list:
         for key in ablation.list_tables():
             t = ablation.load_table(key)
-            print(f"{key:8s} {t.title} ({len(t.rows)} rows)")
+            print(f"{key:16s} {t.title} ({len(t.rows)} rows)")
         return 0
     try:
         keys = ablation.list_tables() if args.table == "all" else [args.table]

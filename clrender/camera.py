@@ -1,4 +1,4 @@
-"""Pinhole cameras (NeRF/Blender convention), ray generation and camera paths.
+"""Pinhole cameras (NeRF/Blender convention) and ray generation (camera paths: paths.py).
 
 Convention: ``c2w`` is a 4x4 camera-to-world matrix; the camera looks down its
 -z axis with +y up and +x right; pixel centres sit at +0.5.
@@ -52,12 +52,16 @@ class Camera:
         """(3,) float64 camera centre in world space."""
         return self.c2w[:3, 3].copy()
 
+    def scaled_to(self, width: int, height: int) -> "Camera":
+        """The same view with its intrinsics scaled to a ``width`` x ``height`` image."""
+        sx, sy = width / self.width, height / self.height
+        return replace(self, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy,
+                       width=int(width), height=int(height))
+
     def resized(self, factor: float) -> "Camera":
         """The same view with the image scaled by ``factor`` (0.5 halves width and height)."""
-        w, h = max(1, round(self.width * factor)), max(1, round(self.height * factor))
-        sx, sy = w / self.width, h / self.height
-        return replace(self, fx=self.fx * sx, fy=self.fy * sy, cx=self.cx * sx, cy=self.cy * sy,
-                       width=w, height=h)
+        return self.scaled_to(max(1, round(self.width * factor)),
+                              max(1, round(self.height * factor)))
 
     def packed(self) -> np.ndarray:
         """(16,) float32 [fx, fy, cx, cy, R (row-major 3x3), origin (3), pad] for kernels."""
@@ -103,44 +107,6 @@ def look_at(eye, target=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0)) -> np.ndarray:
     c2w = np.eye(4)
     c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = right, cam_up, back, eye
     return c2w
-
-
-def orbit_path(n_frames: int, radius: float, elevation_deg: float = 30.0,
-               target=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0)) -> list[np.ndarray]:
-    """``n_frames`` camera-to-world matrices on a circle around ``target`` (z up)."""
-    el = np.deg2rad(elevation_deg)
-    poses = []
-    for az in np.linspace(0.0, 2 * np.pi, n_frames, endpoint=False):
-        eye = np.asarray(target) + radius * np.array(
-            [np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
-        poses.append(look_at(eye, target, up))
-    return poses
-
-
-def spiral_path(c2ws: np.ndarray, n_frames: int, n_rots: float = 2.0,
-                radius_scale: float = 1.0, focus_depth: float | None = None) -> list[np.ndarray]:
-    """A forward-facing spiral around the mean of ``c2ws`` ((N, 4, 4) or (N, 3, 4)).
-
-    The spiral radius is the 90th percentile of camera offsets from their mean along
-    each axis of the mean pose, as in the LLFF render paths.
-    """
-    c2ws = np.asarray(c2ws, dtype=np.float64)[:, :3, :4]
-    centre = c2ws[:, :, 3].mean(0)
-    fwd = -c2ws[:, :, 2].mean(0)
-    fwd /= np.linalg.norm(fwd)
-    up = c2ws[:, :, 1].mean(0)
-    mean_pose = look_at(centre, centre + fwd, up)
-    offsets = (c2ws[:, :, 3] - centre) @ mean_pose[:3, :3]
-    rads = np.percentile(np.abs(offsets), 90, axis=0) * radius_scale
-    focus = focus_depth if focus_depth is not None else max(
-        1.0, float(np.median(np.linalg.norm(c2ws[:, :, 3], axis=1))))
-    target = centre + focus * fwd
-    poses = []
-    for theta in np.linspace(0.0, 2 * np.pi * n_rots, n_frames, endpoint=False):
-        local = np.array([np.cos(theta), -np.sin(theta), -np.sin(0.5 * theta)]) * rads
-        eye = centre + mean_pose[:3, :3] @ local
-        poses.append(look_at(eye, target, up))
-    return poses
 
 
 def generate_rays_cl(camera: Camera, device=None) -> tuple[np.ndarray, np.ndarray]:

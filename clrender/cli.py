@@ -1,9 +1,13 @@
-"""The ``clrender`` command line: info | scene | train | bake | render | eval."""
+"""The ``clrender`` command line: info | scene | train | bake | render | eval, plus each
+method's own commands (``clrender ndrf extract``)."""
 from __future__ import annotations
 
 import argparse
 import json
 import sys
+
+from . import methods
+from .paths import PATHS
 
 
 def _cmd_info(args) -> int:
@@ -40,35 +44,35 @@ def _cmd_scene(args) -> int:
 
 
 def _cmd_train(args) -> int:
-    from .ngprt.train import train
-
-    train(args.data, args.out, preset=args.preset, variant=args.variant, L=args.levels,
-          iterations=args.iterations, seed=args.seed, device=args.torch_device)
+    run = methods.get(args.method).train_from_args(args)
+    print(f"trained {args.method} run in {run}")
     return 0
 
 
 def _cmd_bake(args) -> int:
-    from .ngprt.bake import bake_run
-
-    path = bake_run(args.run, args.out)
+    path = methods.of_run(args.run).bake_run(args.run, args.out)
     print(f"wrote {path}")
     return 0
 
 
+def _render_options(args) -> dict:
+    return {"use_G": False} if args.no_G else {}
+
+
 def _cmd_render(args) -> int:
-    from .render_video import render_path
+    from .video import render_path
 
     render_path(args.model, args.out, path=args.path, frames=args.frames, width=args.width,
                 height=args.height, data=args.data, device=args.device,
-                background=tuple(args.background), fps=args.fps, use_G=not args.no_G)
+                background=args.background, fps=args.fps, **_render_options(args))
     return 0
 
 
 def _cmd_eval(args) -> int:
-    from .ngprt.evaluate import evaluate
+    from .evaluate import evaluate
 
     result = evaluate(args.model, args.data, device=args.device, split=args.split,
-                      out_dir=args.save)
+                      out_dir=args.save, **_render_options(args))
     print(json.dumps(result["mean"], indent=2))
     return 0
 
@@ -92,33 +96,35 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--size", type=int, default=200, help="image width and height in pixels")
     m.set_defaults(func=_cmd_scene)
 
-    s = sub.add_parser("train", help="train an NGP-RT model (PyTorch)")
+    s = sub.add_parser("train", help="train a model (PyTorch)")
     s.add_argument("data", help="dataset folder (Blender transforms.json or LLFF poses_bounds.npy)")
+    s.add_argument("--method", default=methods.DEFAULT, choices=methods.names())
     s.add_argument("--out", required=True, help="run folder (checkpoints, config, log)")
-    s.add_argument("--preset", default="cpu", choices=["tiny", "cpu", "paper"])
-    s.add_argument("--variant", default="separate-v")
-    s.add_argument("--levels", type=int, default=2, help="fine hash levels L")
+    s.add_argument("--preset", default="cpu", choices=methods.all_presets())
     s.add_argument("--iterations", type=int, default=None, help="override the preset's count")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--torch-device", default=None, help="torch device (default cuda if present)")
+    for name in methods.names():
+        methods.get(name).add_train_arguments(s)
     s.set_defaults(func=_cmd_train)
 
-    s = sub.add_parser("bake", help="bake a trained run into a model file")
+    s = sub.add_parser("bake", help="bake a trained run (any method) into a model file")
     s.add_argument("run")
     s.add_argument("--out", required=True)
     s.set_defaults(func=_cmd_bake)
 
     s = sub.add_parser("render", help="render a baked model along a camera path")
     s.add_argument("model")
-    s.add_argument("--path", default="orbit", choices=["orbit", "spiral", "test"])
+    s.add_argument("--path", default="orbit", choices=PATHS)
     s.add_argument("--frames", type=int, default=60)
     s.add_argument("--out", required=True, help="a .mp4/.gif file or a folder for PNGs")
     s.add_argument("--width", type=int, default=400)
     s.add_argument("--height", type=int, default=400)
     s.add_argument("--data", default=None, help="dataset whose cameras define spiral/test paths")
-    s.add_argument("--background", type=float, nargs=3, default=[1.0, 1.0, 1.0])
+    s.add_argument("--background", type=float, nargs=3, default=None,
+                   help="RGB in [0, 1] (default: the method's, NGP-RT white)")
     s.add_argument("--fps", type=int, default=30)
-    s.add_argument("--no-G", action="store_true", help="march without the distance grid G")
+    s.add_argument("--no-G", action="store_true", help="NGP-RT: march without the distance grid G")
     s.add_argument("--device", default=None)
     s.set_defaults(func=_cmd_render)
 
@@ -127,8 +133,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("data")
     s.add_argument("--split", default="test")
     s.add_argument("--save", default=None, help="folder for the rendered test views")
+    s.add_argument("--no-G", action="store_true", help="NGP-RT: march without the distance grid G")
     s.add_argument("--device", default=None)
     s.set_defaults(func=_cmd_eval)
+
+    for name in methods.names():
+        plugin = methods.get(name)
+        if hasattr(plugin, "add_commands"):
+            plugin.add_commands(sub)
     return p
 
 

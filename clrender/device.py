@@ -9,7 +9,8 @@ public functions):
 * anything else: a case-insensitive substring of "platform name / device name".
 
 With nothing set, a GPU is preferred, then a CPU, then whatever exists (under
-Oclgrind the only device is the simulator). When nothing matches, the error lists
+Oclgrind the only device is the simulator); a device that cannot build a trivial kernel is
+passed over. When nothing matches, the error lists
 the devices that exist.
 
 Programs are built from ``kernels/*.cl`` with ``-D`` specialisation and cached per
@@ -118,7 +119,7 @@ def select_device(spec: str | None = None) -> cl.Device:
     if not spec:
         for t in (cl.device_type.GPU, cl.device_type.CPU):
             for d in devices:
-                if d.type & t:
+                if d.type & t and _compiles(d):
                     return d
         return devices[0]
     key = spec.lower()
@@ -138,6 +139,19 @@ def select_device(spec: str | None = None) -> cl.Device:
         raise DeviceError(f"no OpenCL device matches {spec!r}; devices that exist:\n"
                           + _describe(devices))
     return match[0]
+
+
+@functools.lru_cache(maxsize=None)
+def _compiles(device: cl.Device) -> bool:
+    """Whether ``device`` builds a trivial kernel. A driver can list a device it cannot
+    compile for (pip's PoCL 3.0 on a CPU its LLVM does not know: "unknown target CPU
+    'generic'"); the default choice skips such a device rather than failing later."""
+    try:
+        ctx = cl.Context([device])
+        cl.Program(ctx, "__kernel void k(__global float *a) { a[0] = 1.0f; }").build()
+        return True
+    except cl.Error:
+        return False
 
 
 @functools.lru_cache(maxsize=None)

@@ -1,29 +1,48 @@
-/* NGP-RT device helpers shared by ngprt_march.cl and ngprt_deferred.cl.
+/* NGP-RT device helpers of ngprt_march.cl.
  *
  * Mirrors clrender/ngprt/space.py, encoding.py and render_ref.py operation for
  * operation (docs/ngprt.md is the contract): FP contraction is off and the build asks
  * for correctly rounded division and sqrt, so positions, cells and lattice indices are
  * bit-identical to the numpy reference; exp-based values may differ by a few ulps.
  *
- * Compile-time specialisation (-D, set by clrender/ngprt/render_cl.py):
- *   L, L_C, LOG2_T, COARSE_BLOCK, G_RES, N_ATT (attention channels in the coarse grid),
- *   N_INV (spatially invariant logits), VARIANT (VARIANT_* below), UNBOUNDED, USE_G.
+ * Every constant comes as a -D define from clrender/ngprt/render_cl.py:kernel_defines,
+ * so Python and OpenCL share one definition (clrender/ngprt/config.py):
+ *   shared constants (config.kernel_constants): T_STOP, N_MIP, FEATURES, FUSION_HIDDEN
+ *     and the variant codes VARIANT_SUM .. VARIANT_SEPARATE_V (config.VARIANT_CODES);
+ *     SH_DIM and DEFERRED_HIDDEN come too, for the deferred MLP;
+ *   per model: L, L_C, LOG2_T, COARSE_BLOCK, G_RES, N_ATT (attention channels in the
+ *     coarse grid), N_INV (spatially invariant logits), VARIANT, UNBOUNDED, USE_G.
+ * A missing define fails the build: an undefined name is 0 in #if, which would
+ * silently pick VARIANT_SUM's code or a zero T_STOP.
  */
 #ifndef CLRENDER_NGPRT_COMMON_H
 #define CLRENDER_NGPRT_COMMON_H
 #pragma OPENCL FP_CONTRACT OFF
 
-#define VARIANT_SUM 0
-#define VARIANT_MLP 1
-#define VARIANT_SHARED_INV 2
-#define VARIANT_SEPARATE_INV 3
-#define VARIANT_SHARED_V 4
-#define VARIANT_SEPARATE_V 5
+#if !defined(T_STOP) || !defined(N_MIP) || !defined(FEATURES) || !defined(FUSION_HIDDEN)
+#error "ngprt kernels need -D T_STOP N_MIP FEATURES FUSION_HIDDEN (config.kernel_constants)"
+#endif
+#if !defined(VARIANT_SUM) || !defined(VARIANT_MLP) || !defined(VARIANT_SHARED_INV) || \
+    !defined(VARIANT_SEPARATE_INV) || !defined(VARIANT_SHARED_V) || !defined(VARIANT_SEPARATE_V)
+#error "ngprt kernels need -D VARIANT_SUM .. VARIANT_SEPARATE_V (config.VARIANT_CODES)"
+#endif
+#if !defined(L) || !defined(L_C) || !defined(LOG2_T) || !defined(COARSE_BLOCK) || \
+    !defined(G_RES) || !defined(N_ATT) || !defined(N_INV) || !defined(VARIANT) || \
+    !defined(UNBOUNDED) || !defined(USE_G)
+#error "ngprt kernels need -D L L_C LOG2_T COARSE_BLOCK G_RES N_ATT N_INV VARIANT UNBOUNDED USE_G"
+#endif
+/* The code's shape fixes these: features travel as float8, the mip offsets below
+ * spell out 5 levels, the mlp fusion runs its hidden layer in float8 lanes. */
+#if FEATURES != 8
+#error "FEATURES must be 8: features are held in float8"
+#endif
+#if N_MIP != 5
+#error "N_MIP must be 5: OCC_OFFSET spells out five levels"
+#endif
+#if FUSION_HIDDEN % 8 != 0
+#error "FUSION_HIDDEN must be a multiple of 8"
+#endif
 
-#define T_STOP 2e-3f
-#define N_MIP 5
-#define FEATURES 8
-#define FUSION_HIDDEN 64
 #define TABLE_MASK ((1u << LOG2_T) - 1u)
 /* A coarse corner holds 8 + N_ATT channels; the renderer pads each corner to a
  * multiple of 8 floats (COARSE_STRIDE) so every read is an aligned float8. */

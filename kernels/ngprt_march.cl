@@ -37,7 +37,18 @@ inline int ngp_g_distance(float3 u, int exit_lev, __global const uchar *G)
 }
 
 #if !UNBOUNDED
-/* Bounded skip: closed form, rays are straight in u space. Always returns > k. */
+/* Lattice point k (t_k = k * s) lies in cell `cell` at resolution res. */
+inline bool ngp_in_cell(int k, float s, float3 o, float3 d, int res, int3 cell)
+{
+    const int3 c = ngp_cell(ngp_point_u(o, d, (float)k * s), res);
+    return c.x == cell.x && c.y == cell.y && c.z == cell.z;
+}
+
+/* Bounded skip: closed form, rays are straight in u space. Always returns > k.
+ * The float exit distance is off by up to ~1e-7 / |d_a| world units (many steps for a
+ * tiny direction component), so the candidate is checked: if point k_next - 1 has left
+ * the empty cell, bisect for the first point outside it (per axis the cell of t_k is
+ * monotone in k, so the points inside form one run). render_ref.skip_bounded. */
 inline int ngp_skip(int k, float t, float3 o, float3 d, float3 u, int exit_lev, int g,
                     float s, float g_end)
 {
@@ -53,6 +64,14 @@ inline int ngp_skip(int k, float t, float3 o, float3 d, float3 u, int exit_lev, 
     /* Past the end of the ray any k is as good as another: clamp before converting. */
     const float lim = g_end / s + 2.0f;
     int k_next = max(k + 1, ngp_ceil_i(ngp_minf(t_exit / s - 1e-3f, lim)));
+    if (k_next - 1 > k && !ngp_in_cell(k_next - 1, s, o, d, res, i)) {
+        int k_in = k, k_out = k_next - 1;
+        while (k_out - k_in > 1) {
+            const int mid = k_in + (k_out - k_in) / 2;
+            if (ngp_in_cell(mid, s, o, d, res, i)) k_in = mid; else k_out = mid;
+        }
+        k_next = k_out;
+    }
     if (g > 0) {
         const float r = 2.0f * (float)g / (float)G_RES;
         k_next = max(k_next, ngp_floor_i(ngp_minf((t + r) / s, lim)));

@@ -16,7 +16,7 @@ def test_tables_load(key):
 
 def test_table4_rows_pair_G_off_and_on():
     t = ablation.load_table("table4")
-    assert [(r.L, r.use_G) for r in t.rows] == [(L, g) for L in (2, 3, 4) for g in (False, True)]
+    assert [(r.model["L"], r.render["use_G"]) for r in t.rows] == [(L, g) for L in (2, 3, 4) for g in (False, True)]
 
 
 def test_unknown_table_lists_the_known_ones():
@@ -50,18 +50,21 @@ def test_write_table_puts_paper_figures_beside_ours(tmp_path):
     assert "table4/l-2-w-g.png" in (tmp_path / "README.md").read_text()
 
 
-def test_lpips_is_reported_as_not_measured(tmp_path):
+def test_lpips_is_reported_beside_the_paper_or_as_not_measured(tmp_path):
     t = ablation.load_table("table2")
     meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4"}
     md = report.markdown(t, [_measured(25.0, 5.0)] * 3, meta)
     row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
-    assert "| n/a | 0.299 |" in row
+    assert "| n/a | 0.299 |" in row and "LPIPS: n/a where its weights" in md
+    md = report.markdown(t, [{**_measured(25.0, 5.0), "LPIPS": 0.2}] * 3, meta)
+    row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
+    assert "| 0.200 | 0.299 |" in row and "LPIPS: AlexNet, linear heads v0.1" in md
 
 
 def test_speedup_is_baseline_time_over_row_time(tmp_path):
     t = ablation.load_table("table4")
     # w/o G rows take 12 ms, w/ G rows 10 ms: the w/ G rows are 1.2x faster.
-    results = [_measured(20.0, 12.0 if not r.use_G else 10.0) for r in t.rows]
+    results = [_measured(20.0, 12.0 if not r.render["use_G"] else 10.0) for r in t.rows]
     assert report.speedups(t, results) == [None, 1.2, None, 1.2, None, 1.2]
     paper = report.speedups(t, results, key=lambda row, m: row.paper.get("Time (ms)"))
     assert paper[1] == pytest.approx(9.98 / 9.26)
@@ -75,10 +78,11 @@ def test_speedup_is_baseline_time_over_row_time(tmp_path):
 
 
 def test_unknown_baseline_is_an_error(tmp_path, monkeypatch):
-    (tmp_path / "bad.toml").write_text(
+    (tmp_path / "ngprt").mkdir()
+    (tmp_path / "ngprt" / "bad.toml").write_text(
         'title = "t"\npaper_source = "p"\nscene = "builtin-bounded"\npreset = "cpu"\n'
-        'paper_columns = ["PSNR"]\nbaseline = "nope"\n'
-        '[[rows]]\nname = "a"\nvariant = "sum"\nL = 2\n')
+        'method = "ngprt"\npaper_columns = ["PSNR"]\nbaseline = "nope"\n'
+        '[[rows]]\nname = "a"\nmodel = { variant = "sum", L = 2 }\n')
     monkeypatch.setattr(ablation, "ABLATIONS_DIR", tmp_path)
     with pytest.raises(ValueError, match="unknown baseline 'nope'"):
         ablation.load_table("bad")

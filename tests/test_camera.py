@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from clrender.camera import (Camera, generate_rays, generate_rays_cl, look_at, orbit_path,
-                             spiral_path)
+from clrender.camera import Camera, generate_rays, generate_rays_cl, look_at
+from clrender.paths import orbit_path, spiral_path
 
 
 def _cameras():

@@ -1,12 +1,15 @@
-"""The NGP-RT kernels under the Oclgrind simulator: no out-of-bounds access, no data race,
-no use of uninitialised values, no OpenCL API misuse.
+"""The NGP-RT and NDRF kernels under the Oclgrind simulator: no out-of-bounds access, no
+data race, no use of uninitialised values, no OpenCL API misuse.
 
-Generates camera rays (kernels/camera.cl) and renders a tiny random model (L_C=16, 8x8
-pixels) with every aggregation variant, both scene types and G on and off, in a subprocess run by
+NGP-RT: generates camera rays (kernels/camera.cl) and renders a tiny random model (L_C=16,
+8x8 pixels) with every aggregation variant, both scene types and G on and off. NDRF: shades
+a tiny random model (K=2, 10x8 pixels, the mesh crossing the image border) with both kernel
+sizes, two frames each (kernels/ndrf_shade.cl). Each runs in a subprocess run by
 ``oclgrind --check-api --data-races --uninitialized``. One report is expected and
 ignored: pyopencl, when it builds or fetches a kernel, asks ``clGetDeviceInfo`` for a
 property Oclgrind 21.10 does not implement (CL_INVALID_VALUE for 'param_name'); it
-involves no kernel and no call of ours. Every Renderer is kept alive until the end:
+involves no kernel and no call of ours. Every Renderer and Shader is kept alive until
+the end, each at one image size (a Shader frees its frame buffers when the size changes):
 Oclgrind 21.10's --uninitialized plugin reports reads of freshly written buffers as
 uninitialised once the memory of released buffers is reused by new ones (seen with a
 second Renderer after the first was freed; none while all stay alive, and none with a
@@ -40,7 +43,7 @@ for scene, c2w in views.items():
         model = random_baked_model(config, 0, 1.0)
         for use_G in (True, False):
             keep.append(Renderer(model, use_G=use_G))
-            out = keep[-1].render(camera)
+            out = keep[-1].render(camera, stats=True)
             print("RENDERED", scene, variant, use_G, int(out["n_march"].sum()),
                   int(out["n_occ"].sum()), flush=True)
 """
@@ -65,3 +68,50 @@ def test_kernels_clean_under_oclgrind():
     assert proc.returncode == 0, f"oclgrind run failed ({proc.returncode}):\n{log[-4000:]}"
     assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])
     assert log.count("RENDERED") == 25, log[-4000:]
+
+
+NDRF_SCRIPT = """
+from clrender.camera import Camera, look_at
+from clrender.ndrf.config import NDRFConfig
+from clrender.ndrf.hits import HitCaster
+from clrender.ndrf.random_model import random_ndrf_model
+from clrender.ndrf.shader_cl import Shader
+
+camera = Camera.from_fov(0.8, 10, 8, look_at([2.2, -1.6, 0.9], [0.5, -0.3, 0.2]))
+keep = []  # see the module doc: no buffer is released while Oclgrind watches
+for kernel_size in (2, 1):
+    model = random_ndrf_model(NDRFConfig(thresholds=(1e-4, 1e-2), kernel_size=kernel_size), 0)
+    hits = HitCaster(model).cast_camera(camera)
+    keep.append(Shader(model))
+    for frame in range(2):
+        rgb, ms = keep[-1].shade(camera, hits.tri, hits.bary)
+    print("RENDERED", kernel_size, round(float(hits.coverage.mean()), 3),
+          bool(hits.coverage[:, -1].any() or hits.coverage[-1].any()), flush=True)
+"""
+
+
+def _oclgrind(script: str) -> tuple[subprocess.CompletedProcess, str, list[str]]:
+    """Runs ``script`` under Oclgrind; returns the process, its log and the error lines
+    (the one known clGetDeviceInfo report left out, see the module doc)."""
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, CLRENDER_DEVICE="",
+               PYTHONPATH=os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run(
+        ["oclgrind", "--check-api", "--data-races", "--uninitialized", sys.executable, "-c",
+         script], capture_output=True, text=True, env=env, cwd=root, timeout=300)
+    log = proc.stdout + proc.stderr
+    blocks = [b for b in re.split(r"\n\s*\n", log)
+              if not ("clGetDeviceInfo" in b and "CL_INVALID_VALUE" in b and "param_name" in b)]
+    return proc, log, [line for b in blocks for line in b.splitlines() if ERROR.search(line)]
+
+
+@pytest.mark.oclgrind
+@pytest.mark.skipif(shutil.which("oclgrind") is None,
+                    reason="the oclgrind executable is not on PATH (apt install oclgrind)")
+def test_ndrf_kernels_clean_under_oclgrind():
+    proc, log, errors = _oclgrind(NDRF_SCRIPT)
+    assert proc.returncode == 0, f"oclgrind run failed ({proc.returncode}):\n{log[-4000:]}"
+    assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])
+    rendered = [line.split() for line in log.splitlines() if line.startswith("RENDERED")]
+    assert len(rendered) == 2, log[-4000:]
+    assert all(0.0 < float(r[2]) < 1.0 and r[3] == "True" for r in rendered), rendered

@@ -16,7 +16,7 @@ from clrender.ngprt.config import VARIANTS, preset
 from clrender.ngprt.random_model import random_baked_model
 from clrender.ngprt.render_cl import Renderer
 from clrender.ngprt.render_ref import march_reference, render_reference
-from clrender.render_video import path_cameras
+from clrender.paths import path_cameras
 
 SIZE = 32
 BACKGROUND = (1.0, 0.5, 0.25)
@@ -43,7 +43,7 @@ def _assert_matches(out: dict, ref: dict):
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_render_matches_reference(variant, scene):
     model, camera = _model(variant, scene), _camera(scene)
-    out = Renderer(model, use_G=True).render(camera, background=BACKGROUND)
+    out = Renderer(model, use_G=True).render(camera, background=BACKGROUND, stats=True)
     ref = render_reference(model, camera, background=BACKGROUND, use_G=True)
     assert out["rgb"].shape == (SIZE, SIZE, 3) and out["rgb"].dtype == np.float32
     assert out["n_occ"].sum() > 0, "test model has no occupied sample in view"
@@ -71,8 +71,8 @@ def test_distance_grid_skips_only_empty_space(variant, scene):
     # Seed 3 puts empty coarse cells (exit level coarser than G) in view, where the paper
     # reads G; with few of them (seed 2, unbounded) G rightly changes nothing.
     model, camera = _model(variant, scene, seed=3), _camera(scene)
-    with_g = Renderer(model, use_G=True).render(camera)
-    without = Renderer(model, use_G=False).render(camera)
+    with_g = Renderer(model, use_G=True).render(camera, stats=True)
+    without = Renderer(model, use_G=False).render(camera, stats=True)
     np.testing.assert_array_equal(with_g["n_occ"], without["n_occ"])
     np.testing.assert_allclose(with_g["rgb"], without["rgb"], rtol=0, atol=1e-6)
     assert with_g["n_march"].sum() < without["n_march"].sum()
@@ -80,7 +80,7 @@ def test_distance_grid_skips_only_empty_space(variant, scene):
 
 def test_render_video_writes_png_frames(tmp_path):
     from clrender.ngprt.baked import save_baked
-    from clrender.render_video import render_path
+    from clrender.video import render_path
 
     path = tmp_path / "model.npz"
     save_baked(_model("separate-v", "bounded"), path)

@@ -226,7 +226,7 @@ def test_trained_model_beats_constant_colour(tiny_run):
     figures are in the report of this change; 5 dB is far below the measured gap, and far
     above what a model that learned nothing (a blurred mean) could reach."""
     from clrender.metrics import psnr
-    from clrender.ngprt.evaluate import evaluate
+    from clrender.evaluate import evaluate
 
     result = evaluate(tiny_run["baked"], tiny_run["data"])
     mean_colour = tiny_run["train"].images.reshape(-1, 3).mean(0)

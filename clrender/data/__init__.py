@@ -6,7 +6,8 @@ Examples:
     >>> ds = load_dataset(folder, split="train")   # ds.images: (20, 64, 64, 3) float32
 """
 from .blender import load_blender
-from .dataset import Dataset, load_dataset
+from .dataset import Dataset
+from .load import load_dataset
 from .llff import load_llff
 from .scene import make_scene
 

@@ -15,26 +15,22 @@ References: NGP-RT (Hu et al., ECCV 2024) §4.3, S2.5.
 """
 from __future__ import annotations
 
-import json
-import zipfile
-import zlib
+import math
+import numbers
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import binary_dilation, distance_transform_edt
 
-from ..atomic import atomic_write
-from .config import DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM, ModelConfig
+from .. import bakedfile
+from ..bakedfile import F32, I32, U8, BakedFormatError, check_arrays, fail
+from .config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, MAX_LATTICE_POINTS, N_MIP, SH_DIM,
+                     ModelConfig)
 
 FORMAT = "clrender-ngprt"
 VERSION = 1
-_F32, _U8, _I32 = np.dtype(np.float32), np.dtype(np.uint8), np.dtype(np.int32)
 _CHUNK = 1 << 18          # coarse corners evaluated per call of a corner-value callable
-
-
-class BakedFormatError(ValueError):
-    """An invalid baked file or model; the message names the file and the problem."""
 
 
 @dataclass
@@ -50,6 +46,7 @@ class BakedModel:
     config: ModelConfig
     gamma: float
     arrays: dict
+    method = "ngprt"          # the method registry's name (clrender/methods.py)
 
     @property
     def step(self) -> float:
@@ -70,24 +67,24 @@ def expected_arrays(config: ModelConfig, n_blocks: int) -> dict:
     c = config
     nb, h, n_in = c.L_C // c.coarse_block, DEFERRED_HIDDEN, 7 + SH_DIM
     out = {
-        "coarse_block_index": ((nb, nb, nb), _I32),
-        "coarse_blocks": ((n_blocks,) + (c.coarse_block + 1,) * 3 + (c.coarse_channels,), _F32),
-        "fine_tables": ((c.L, c.T, FEATURES), _F32),
+        "coarse_block_index": ((nb, nb, nb), I32),
+        "coarse_blocks": ((n_blocks,) + (c.coarse_block + 1,) * 3 + (c.coarse_channels,), F32),
+        "fine_tables": ((c.L, c.T, FEATURES), F32),
     }
     for lev in range(N_MIP):
-        out[f"occupancy_{lev}"] = ((c.L_C >> lev,) * 3, _U8)
-    out["G"] = ((c.G_res,) * 3, _U8)
+        out[f"occupancy_{lev}"] = ((c.L_C >> lev,) * 3, U8)
+    out["G"] = ((c.G_res,) * 3, U8)
     for name, shape in (("deferred_w0", (n_in, h)), ("deferred_b0", (h,)),
                         ("deferred_w1", (h, h)), ("deferred_b1", (h,)),
                         ("deferred_w2", (h, 3)), ("deferred_b2", (3,))):
-        out[name] = (shape, _F32)
+        out[name] = (shape, F32)
     if c.variant == "mlp":
         for name, shape in (("fusion_w0", (FEATURES * c.L, FUSION_HIDDEN)),
                             ("fusion_b0", (FUSION_HIDDEN,)),
                             ("fusion_w1", (FUSION_HIDDEN, FEATURES)), ("fusion_b1", (FEATURES,))):
-            out[name] = (shape, _F32)
+            out[name] = (shape, F32)
     if c.n_inv_attention:
-        out["attention_inv"] = ((c.n_inv_attention,), _F32)
+        out["attention_inv"] = ((c.n_inv_attention,), F32)
     return out
 
 
@@ -183,42 +180,21 @@ def sparse_coarse_grid(corner_values, occupancy_0: np.ndarray, B: int,
 
 # ---- validation -------------------------------------------------------------------
 
-def _fail(where: str, problem: str):
-    raise BakedFormatError(f"{where}: {problem}")
-
-
-def _check_arrays(model: BakedModel, where: str) -> dict:
+def _check_arrays(model: BakedModel, where: str) -> None:
     arrays, cfg = model.arrays, model.config
-    blocks = arrays.get("coarse_blocks")
+    blocks = arrays.get("coarse_blocks") if isinstance(arrays, dict) else None
     n_blocks = int(np.shape(blocks)[0]) if blocks is not None and np.ndim(blocks) == 5 else 0
-    expected = expected_arrays(cfg, n_blocks)
-    missing, extra = sorted(set(expected) - set(arrays)), sorted(set(arrays) - set(expected))
-    if missing:
-        _fail(where, f"missing arrays {missing} (variant {cfg.variant!r})")
-    if extra:
-        _fail(where, f"unexpected arrays {extra} (variant {cfg.variant!r})")
-    for name, (shape, dtype) in expected.items():
-        a = arrays[name]
-        if not isinstance(a, np.ndarray):
-            _fail(where, f"{name} is a {type(a).__name__}, expected a numpy array")
-        if a.dtype != dtype:
-            _fail(where, f"{name} has dtype {a.dtype}, expected {dtype}")
-        if a.shape != shape:
-            _fail(where, f"{name} has shape {a.shape}, expected {shape}")
-        if dtype == _F32 and not np.all(np.isfinite(a)):
-            bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
-            _fail(where, f"{name} has {bad} non-finite values (NaN or inf)")
-    return expected
+    check_arrays(arrays, expected_arrays(cfg, n_blocks), where, f" (variant {cfg.variant!r})")
 
 
 def _check_blocks(model: BakedModel, where: str):
     index, n_blocks = model.arrays["coarse_block_index"], model.n_blocks
     if index.size and (index.min() < -1 or index.max() >= n_blocks):
-        _fail(where, f"coarse_block_index has values in [{index.min()}, {index.max()}], "
+        fail(where, f"coarse_block_index has values in [{index.min()}, {index.max()}], "
                      f"expected -1 or a block in [0, {n_blocks})")
     used = np.sort(index[index >= 0])
     if len(used) != n_blocks or np.any(used != np.arange(n_blocks)):
-        _fail(where, f"coarse_block_index must reference each of the {n_blocks} blocks "
+        fail(where, f"coarse_block_index must reference each of the {n_blocks} blocks "
                      f"exactly once ({len(used)} references, {len(np.unique(used))} distinct)")
 
 
@@ -226,43 +202,63 @@ def _check_occupancy(model: BakedModel, where: str):
     cfg, mip = model.config, model.occupancy_mip()
     for lev, grid in enumerate(mip):
         if grid.size and grid.max() > 1:
-            _fail(where, f"occupancy_{lev} has values other than 0 and 1 (max {grid.max()})")
+            fail(where, f"occupancy_{lev} has values other than 0 and 1 (max {grid.max()})")
     for lev, (want, grid) in enumerate(zip(build_mip(mip[0]), mip)):
         if not np.array_equal(want, grid):
-            _fail(where, f"occupancy_{lev} is not the 2x max-pool of occupancy_{lev - 1} "
+            fail(where, f"occupancy_{lev} is not the 2x max-pool of occupancy_{lev - 1} "
                          f"({int(np.count_nonzero(want != grid))} cells differ)")
     nb = cfg.L_C // cfg.coarse_block
     covered = _pool(mip[0], nb).astype(bool)
     absent = covered & (model.arrays["coarse_block_index"] < 0)
     if absent.any():
-        _fail(where, f"{int(absent.sum())} coarse blocks hold occupied occupancy_0 cells "
+        fail(where, f"{int(absent.sum())} coarse blocks hold occupied occupancy_0 cells "
                      f"but are absent (coarse_block_index == -1)")
     want_G = build_distance_grid(mip[0], cfg.G_res)
     over = model.arrays["G"] > want_G
     if over.any():
-        _fail(where, f"G is not conservative: {int(over.sum())} voxels exceed the distance "
+        fail(where, f"G is not conservative: {int(over.sum())} voxels exceed the distance "
                      f"to the nearest occupied voxel (max excess "
                      f"{int((model.arrays['G'].astype(int) - want_G).max())})")
+
+
+def _check_gamma(model: BakedModel, where: str) -> None:
+    """gamma a finite number > 0 whose float32 step ``s = gamma * s0`` puts at most
+    MAX_LATTICE_POINTS lattice points on a ray (docs/ngprt.md "Step lattice")."""
+    cfg, gamma = model.config, model.gamma
+    if isinstance(gamma, bool) or not isinstance(gamma, numbers.Real):
+        fail(where, f"gamma {gamma!r} is not a number")
+    try:
+        value = float(gamma)
+    except OverflowError:
+        fail(where, f"gamma is an integer of {len(str(abs(gamma)))} digits, beyond a float")
+    if not (math.isfinite(value) and value > 0):
+        fail(where, f"gamma must be finite and > 0, got {gamma!r}")
+    step = value * cfg.s0
+    if step > float(np.finfo(np.float32).max):
+        fail(where, f"gamma={gamma!r} is too large: the step gamma * s0 = {step:.3g} "
+                    f"overflows float32")
+    s = float(np.float32(step))
+    points = cfg.max_ray_length / s if s > 0 else math.inf
+    if points > MAX_LATTICE_POINTS:
+        fail(where, f"gamma={gamma!r} is too small: the step s = gamma * s0 = {s:.3g} puts "
+                    f"up to {points:.3g} lattice points on a ray, more than "
+                    f"{MAX_LATTICE_POINTS} (need gamma >= {cfg.min_gamma:.3g} at "
+                    f"L_C={cfg.L_C}, {cfg.scene})")
 
 
 def validate(model: BakedModel, where: str = "model") -> None:
     """Check a baked model against docs/ngprt.md; raises :class:`BakedFormatError`.
 
-    Checks: names, shapes and dtypes of the arrays, finite floats, block indices in
+    Checks: gamma a finite number > 0 with at most ``MAX_LATTICE_POINTS`` lattice points
+    per ray, names, shapes and dtypes of the arrays, finite floats, block indices in
     [-1, n_blocks) with every block referenced once, occupancy 0/1 and a consistent mip,
-    occupied cells in present blocks, G conservative (never above the recomputed G),
-    gamma > 0. ``where`` (e.g. the file name) starts every message.
+    occupied cells in present blocks, G conservative (never above the recomputed G).
+    (The config checked its own fields when it was made.) ``where`` (e.g. the file
+    name) starts every message.
     """
     if not isinstance(model.config, ModelConfig):
-        _fail(where, f"config is a {type(model.config).__name__}, expected ModelConfig")
-    try:
-        gamma = float(model.gamma)
-    except (TypeError, ValueError):
-        _fail(where, f"gamma {model.gamma!r} is not a number")
-    if not (np.isfinite(gamma) and gamma > 0):
-        _fail(where, f"gamma must be finite and > 0, got {model.gamma!r}")
-    if not isinstance(model.arrays, dict):
-        _fail(where, f"arrays is a {type(model.arrays).__name__}, expected a dict")
+        fail(where, f"config is a {type(model.config).__name__}, expected ModelConfig")
+    _check_gamma(model, where)
     _check_arrays(model, where)
     _check_blocks(model, where)
     _check_occupancy(model, where)
@@ -270,91 +266,26 @@ def validate(model: BakedModel, where: str = "model") -> None:
 
 # ---- files ------------------------------------------------------------------------
 
-def _manifest(model: BakedModel) -> dict:
-    return {"format": FORMAT, "version": VERSION, "config": model.config.to_dict(),
-            "gamma": float(model.gamma),
-            "arrays": {n: {"shape": list(a.shape), "dtype": str(a.dtype)}
-                       for n, a in sorted(model.arrays.items())}}
-
-
-def _savez(path: Path, payload: dict) -> None:
-    with open(path, "wb") as f:     # a file object: numpy adds no ".npz" to the name
-        np.savez_compressed(f, **payload)
-
-
 def save_baked(model: BakedModel, path) -> Path:
     """Validate ``model`` and write it to ``path`` atomically (temp file + rename).
 
     Returns:
         the path written.
     """
-    path = Path(path)
     validate(model, str(path))
-    payload = {n: np.ascontiguousarray(a) for n, a in model.arrays.items()}
-    payload["manifest"] = np.array(json.dumps(_manifest(model)))
-    return atomic_write(path, lambda tmp: _savez(tmp, payload))
-
-
-_READ_ERRORS = (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, KeyError)
-
-
-def _read_manifest(npz, where: str) -> dict:
-    if "manifest" not in npz.files:
-        _fail(where, "no 'manifest' entry: not a clrender baked model")
-    raw = npz["manifest"]
-    if raw.dtype.kind != "U" or raw.shape != ():
-        _fail(where, f"manifest must be a 0-d unicode array, found {raw.dtype} {raw.shape}")
-    try:
-        manifest = json.loads(str(raw))
-    except json.JSONDecodeError as e:
-        _fail(where, f"manifest is not valid JSON ({e})")
-    if not isinstance(manifest, dict):
-        _fail(where, "manifest is not a JSON object")
-    if manifest.get("format") != FORMAT:
-        _fail(where, f"format is {manifest.get('format')!r}, expected {FORMAT!r}")
-    if manifest.get("version") != VERSION:
-        _fail(where, f"unknown version {manifest.get('version')!r}; this reader knows "
-                     f"version {VERSION}")
-    for key in ("config", "gamma", "arrays"):
-        if key not in manifest:
-            _fail(where, f"manifest has no {key!r}")
-    return manifest
+    manifest = {"format": FORMAT, "version": VERSION, "config": model.config.to_dict(),
+                "gamma": float(model.gamma)}
+    return bakedfile.save(path, manifest, model.arrays)
 
 
 def load_baked(path) -> BakedModel:
     """Load and validate a baked model; raises :class:`BakedFormatError` naming the file."""
     where = str(path)
-    try:
-        npz = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise
-    except _READ_ERRORS as e:
-        raise BakedFormatError(f"{where}: not a readable .npz archive "
-                               f"(truncated or corrupt?): {e}") from e
-    if not isinstance(npz, np.lib.npyio.NpzFile):
-        _fail(where, "not an .npz archive (a single .npy array)")
-    with npz:
-        try:
-            manifest = _read_manifest(npz, where)
-            arrays = {n: npz[n] for n in npz.files if n != "manifest"}
-        except BakedFormatError:
-            raise
-        except _READ_ERRORS as e:
-            raise BakedFormatError(f"{where}: cannot read the archive's arrays "
-                                   f"(truncated or corrupt?): {e}") from e
+    manifest, arrays = bakedfile.read(path, FORMAT, VERSION, keys=("config", "gamma"))
     try:
         config = ModelConfig.from_dict(manifest["config"], where=f"{where}: config")
     except (TypeError, ValueError) as e:
         raise BakedFormatError(f"{where}: bad config: {e}") from e
-    listed = manifest["arrays"]
-    if not isinstance(listed, dict) or set(listed) != set(arrays):
-        names = sorted(listed) if isinstance(listed, dict) else listed
-        _fail(where, f"manifest lists arrays {names}, the archive holds {sorted(arrays)}")
-    for name, a in arrays.items():
-        meta = listed[name]
-        if not isinstance(meta, dict) or list(meta.get("shape", [])) != list(a.shape) \
-                or meta.get("dtype") != str(a.dtype):
-            _fail(where, f"{name} is {a.dtype} {a.shape} but the manifest says {meta}")
     model = BakedModel(config, manifest["gamma"], arrays)
     validate(model, where)
     model.gamma = float(model.gamma)

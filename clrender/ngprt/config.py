@@ -9,6 +9,7 @@ References: NGP-RT (Hu et al., ECCV 2024) §4.1-4.3, S2.1, S2.3, S2.5.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, fields, replace
 
 VARIANTS = ("sum", "mlp", "shared-inv", "separate-inv", "shared-v", "separate-v")
@@ -19,6 +20,36 @@ FEATURES = 8              # deferred feature: density 1, diffuse rgb 3, specular
 SH_DIM = 16               # SH degree 4 view encoding (S2.1)
 DEFERRED_HIDDEN = 64      # MLP_psi: 23 -> 64 -> 64 -> 3 (S2.1)
 FUSION_HIDDEN = 64        # the `mlp` aggregation baseline: 8L -> 64 -> 8
+INT32_MAX = 2**31 - 1     # the kernels index and count with int
+# Most occupancy cells per axis: the mip's ~1.14 L_C^3 cells are indexed with int32.
+MAX_L_C = 1024
+# Most lattice points a ray may hold: the longest ray range over the step (S2.3), so a
+# tiny gamma cannot make a march run (almost) forever or overflow the kernels' int k.
+MAX_LATTICE_POINTS = 1 << 20
+LOG2_T_RANGE = (4, 24)    # hash table sizes 2^4 .. 2^24, fine and auxiliary
+# Farthest near/far (world units): beyond ~8e6, warp(far) = 2 - 1/far rounds to 2 in
+# float32, where unwarp is infinite (docs/ngprt.md "Step lattice").
+MAX_FAR = 1e6
+# -D VARIANT codes of the kernels, VARIANT_SUM = 0 .. VARIANT_SEPARATE_V = 5.
+VARIANT_CODES = {v: code for code, v in enumerate(VARIANTS)}
+
+
+def kernel_constants() -> dict:
+    """The constants the NGP-RT kernels share with this module, as ``-D`` defines.
+
+    The kernels define none of them themselves (``kernels/ngprt_common.h`` refuses to
+    build without them), so a change here reaches Python and OpenCL alike.
+
+    Returns:
+        ``{name: value}``: T_STOP, N_MIP, FEATURES, SH_DIM, DEFERRED_HIDDEN,
+        FUSION_HIDDEN and ``VARIANT_<NAME>`` (e.g. ``VARIANT_SEPARATE_V``) for each of
+        :data:`VARIANTS` with its code from :data:`VARIANT_CODES`.
+    """
+    out = {"T_STOP": T_STOP, "N_MIP": N_MIP, "FEATURES": FEATURES, "SH_DIM": SH_DIM,
+           "DEFERRED_HIDDEN": DEFERRED_HIDDEN, "FUSION_HIDDEN": FUSION_HIDDEN}
+    for variant, code in VARIANT_CODES.items():
+        out["VARIANT_" + variant.upper().replace("-", "_")] = code
+    return out
 
 
 @dataclass(frozen=True)
@@ -54,22 +85,9 @@ class ModelConfig:
     aux_hidden: int = 64
 
     def __post_init__(self):
-        problems = []
-        if self.variant not in VARIANTS:
-            problems.append(f"variant {self.variant!r} is not one of {VARIANTS}")
-        if self.scene not in SCENES:
-            problems.append(f"scene {self.scene!r} is not one of {SCENES}")
-        if self.L < 1:
-            problems.append(f"L must be >= 1, got {self.L}")
-        if self.L_C % (1 << (N_MIP - 1)) or self.L_C % self.coarse_block:
-            problems.append(f"L_C={self.L_C} must be divisible by {1 << (N_MIP - 1)} "
-                            f"and by coarse_block={self.coarse_block}")
-        if self.G_res < 1 or self.L_C % self.G_res:
-            problems.append(f"G_res={self.G_res} must divide L_C={self.L_C}")
-        if not 4 <= self.log2_T <= 24:
-            problems.append(f"log2_T={self.log2_T} out of range [4, 24]")
-        if not 0.0 <= self.near < self.far:
-            problems.append(f"need 0 <= near < far, got near={self.near}, far={self.far}")
+        problems = _type_problems(self)
+        if not problems:
+            problems = _size_problems(self)
         if problems:
             raise ValueError("invalid ModelConfig: " + "; ".join(problems))
 
@@ -91,6 +109,18 @@ class ModelConfig:
         """Base lattice step: the diagonal of a coarse voxel, 2*sqrt(3)/L_C in the
         bounded [-1, 1]^3 cube (S2.3: 2*sqrt(3)/512 for L_C = 512)."""
         return 2.0 * math.sqrt(3.0) / self.L_C
+
+    @property
+    def max_ray_length(self) -> float:
+        """Longest range of lattice distances a ray can have: the diagonal ``2*sqrt(3)``
+        of the bounded [-1, 1]^3 box, or the whole warped range ``[0, 2)`` of an
+        unbounded scene (S2.3). Over the step it bounds the lattice points of a ray."""
+        return 2.0 * math.sqrt(3.0) if self.scene == "bounded" else 2.0
+
+    @property
+    def min_gamma(self) -> float:
+        """Smallest step scaler gamma that keeps a ray within MAX_LATTICE_POINTS points."""
+        return self.max_ray_length / (MAX_LATTICE_POINTS * self.s0)
 
     @property
     def n_attention(self) -> int:
@@ -116,6 +146,59 @@ class ModelConfig:
         if unknown:
             raise ValueError(f"{where}: unknown model config keys {unknown}")
         return cls(**d)
+
+
+_INT_FIELDS = ("L", "L_C", "log2_T", "G_res", "coarse_block", "aux_levels", "aux_min_res",
+               "aux_log2_T", "aux_features", "aux_hidden")
+
+
+def _type_problems(c: ModelConfig) -> list[str]:
+    """Fields of the wrong kind: ints that are not integers >= 1, non-finite distances,
+    unknown variant or scene (checked first: the sizes below do arithmetic on them)."""
+    problems = []
+    if c.variant not in VARIANTS:
+        problems.append(f"variant {c.variant!r} is not one of {VARIANTS}")
+    if c.scene not in SCENES:
+        problems.append(f"scene {c.scene!r} is not one of {SCENES}")
+    for name in _INT_FIELDS:
+        v = getattr(c, name)
+        if isinstance(v, bool) or not isinstance(v, numbers.Integral):
+            problems.append(f"{name} must be an integer, got {v!r}")
+        elif not 1 <= v <= INT32_MAX:
+            problems.append(f"{name} must be in [1, {INT32_MAX}], got {v}")
+    for name in ("near", "far"):
+        v = getattr(c, name)
+        if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
+            problems.append(f"{name} must be a finite number, got {v!r}")
+        elif v > MAX_FAR:
+            problems.append(f"{name}={v} is above the maximum {MAX_FAR:g} (world units)")
+    if not problems and not 0.0 <= c.near < c.far:
+        problems.append(f"need 0 <= near < far, got near={c.near}, far={c.far}")
+    return problems
+
+
+def _size_problems(c: ModelConfig) -> list[str]:
+    """Sizes the grids, the mip and the kernels' int32 arithmetic can hold."""
+    problems = []
+    lo, hi = LOG2_T_RANGE
+    for name in ("log2_T", "aux_log2_T"):
+        if not lo <= getattr(c, name) <= hi:
+            problems.append(f"{name}={getattr(c, name)} out of range [{lo}, {hi}]")
+    if c.L_C > MAX_L_C:
+        problems.append(f"L_C={c.L_C} is above the maximum {MAX_L_C}")
+    if c.L_C % (1 << (N_MIP - 1)) or c.L_C % c.coarse_block:
+        problems.append(f"L_C={c.L_C} must be divisible by {1 << (N_MIP - 1)} "
+                        f"and by coarse_block={c.coarse_block}")
+    if c.L_C % c.G_res:
+        problems.append(f"G_res={c.G_res} must divide L_C={c.L_C}")
+    if c.aux_min_res > c.L_C:
+        problems.append(f"aux_min_res={c.aux_min_res} must be <= L_C={c.L_C} (the auxiliary "
+                        f"grids grow from aux_min_res to L_C)")
+    # Finest hash resolution L_C * 2^L; its corners (+1) and p = u * R must stay in int32.
+    if c.L + 1 + int(c.L_C).bit_length() > 31:
+        problems.append(f"L={c.L} is too large for L_C={c.L_C}: the fine grid resolutions "
+                        f"L_C << (L+1) must fit in int32")
+    return problems
 
 
 PRESETS: dict[str, ModelConfig] = {

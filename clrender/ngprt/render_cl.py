@@ -37,15 +37,20 @@ DEFERRED_PARAMS = ("deferred_w0", "deferred_b0", "deferred_w1", "deferred_b1",
 
 
 def kernel_defines(config, use_G: bool, deferred_vec: int = 1) -> tuple[dict, dict]:
-    """The ``-D`` defines of the march and deferred programs for a model config."""
+    """The ``-D`` defines of the march and deferred programs for a model config: the
+    shared constants of :func:`clrender.ngprt.config.kernel_constants` (the kernels define
+    none of their own) plus the model's sizes, variant and scene."""
+    from .config import VARIANT_CODES as codes, kernel_constants   # the one source
+
+    shared = kernel_constants()
     march = {
-        "L": config.L, "L_C": config.L_C, "LOG2_T": config.log2_T,
-        "VARIANT": VARIANT_CODES[config.variant], "UNBOUNDED": config.scene == "unbounded",
+        **shared, "L": config.L, "L_C": config.L_C, "LOG2_T": config.log2_T,
+        "VARIANT": codes[config.variant], "UNBOUNDED": config.scene == "unbounded",
         "USE_G": bool(use_G), "G_RES": config.G_res,
         "COARSE_BLOCK": config.coarse_block, "N_ATT": config.n_attention,
         "N_INV": config.n_inv_attention,
     }
-    return march, {"DEFERRED_VEC": deferred_vec}
+    return march, {**shared, "DEFERRED_VEC": deferred_vec}
 
 
 def _packed(arrays: dict, names, shapes) -> np.ndarray:
@@ -92,7 +97,8 @@ def occupancy_mip(model) -> np.ndarray:
 
 
 class Renderer:
-    """Renders a baked NGP-RT model with OpenCL.
+    """Renders a baked NGP-RT model with OpenCL; the model is uploaded once, per-frame
+    buffers are kept while the image size stays the same.
 
     Args:
         model: a :class:`clrender.ngprt.baked.BakedModel` (``.config``, ``.step``,
@@ -101,6 +107,10 @@ class Renderer:
             ``$CLRENDER_DEVICE``).
         use_G: skip empty space with the occupancy distance grid G (paper §4.3).
     """
+
+    SCALAR_STATS = {"Marching": "n_march", "Occupied": "n_occ"}
+    RENDER_OPTIONS = {"use_G": bool}
+    TIME_NOTE = "OpenCL kernel time per frame (ray marching + deferred MLP)"
 
     def __init__(self, model, device=None, use_G: bool = True):
         self.model, self.config, self.use_G = model, model.config, bool(use_G)
@@ -147,19 +157,27 @@ class Renderer:
             "deferred": self._buffer(deferred_params(self.model)),
         }
 
-    def _outputs(self, n: int) -> dict:
-        ctx, mf = self.runtime.context, cl.mem_flags
-        return {"feat": cl.Buffer(ctx, mf.READ_WRITE, 32 * n),
-                "depth": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n),
-                "n_march": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n),
-                "n_occ": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n)}
+    def _outputs(self, camera) -> dict:
+        """Per-frame buffers, kept across frames of the same size (re-allocated otherwise)."""
+        n = camera.width * camera.height
+        if getattr(self, "_frame_n", None) != n:
+            ctx, mf = self.runtime.context, cl.mem_flags
+            self._frame = {"cam": cl.Buffer(ctx, mf.READ_ONLY, 16 * 4),
+                           "feat": cl.Buffer(ctx, mf.READ_WRITE, 32 * n),
+                           "depth": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n),
+                           "n_march": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n),
+                           "n_occ": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n),
+                           "rgb": cl.Buffer(ctx, mf.WRITE_ONLY, 12 * n)}
+            self._frame_n = n
+        cl.enqueue_copy(self.runtime.queue, self._frame["cam"], camera.packed())
+        return self._frame
 
-    def _enqueue_march(self, camera, cam_buf, out) -> cl.Event:
+    def _enqueue_march(self, camera, out) -> cl.Event:
         cfg, b = self.config, self._bufs
         lx, ly = MARCH_LOCAL
         gsize = (-(-camera.width // lx) * lx, -(-camera.height // ly) * ly)
         return self._march(
-            self.runtime.queue, gsize, MARCH_LOCAL, cam_buf, np.int32(camera.width),
+            self.runtime.queue, gsize, MARCH_LOCAL, out["cam"], np.int32(camera.width),
             np.int32(camera.height), self.step, F32(cfg.near), F32(cfg.far), b["occ"], b["G"],
             b["block_index"], b["blocks"], self.n_blocks, b["tables"], b["fusion"],
             out["feat"], out["depth"], out["n_march"], out["n_occ"])
@@ -173,42 +191,43 @@ class Renderer:
         """The march alone, for tests: ``acc`` (H*W, 7), ``opacity``, ``depth`` (H*W,)
         float32, ``n_march``, ``n_occ`` (H*W,) int32, ``ms_march``."""
         n = camera.width * camera.height
-        out = self._outputs(n)
-        event = self._enqueue_march(camera, self._buffer(camera.packed()), out)
+        out = self._outputs(camera)
+        event = self._enqueue_march(camera, out)
         feat = self._read(out["feat"], (n, 8), F32)
         return {"acc": feat[:, :7].copy(), "opacity": feat[:, 7].copy(),
                 "depth": self._read(out["depth"], (n,), F32),
                 "n_march": self._read(out["n_march"], (n,), np.int32),
                 "n_occ": self._read(out["n_occ"], (n,), np.int32), "ms_march": event_ms(event)}
 
-    def render(self, camera, background=(1.0, 1.0, 1.0)) -> dict:
-        """Render one view.
+    def render(self, camera, background=(1.0, 1.0, 1.0), stats: bool = False) -> dict:
+        """Render one view; only ``rgb`` is read back unless ``stats`` is asked for.
 
         Args:
             camera: a :class:`clrender.camera.Camera`.
-            background: RGB in [0, 1] composited behind the model.
+            background: RGB in [0, 1] composited behind the model (None: white).
+            stats: also read back the per-pixel statistics.
         Returns:
-            dict with ``rgb`` (H, W, 3) float32 in [0, 1]; ``n_march``, ``n_occ`` (H, W)
-            int32 marching points and occupied samples per ray; ``depth`` (H, W) float32
-            world units along the ray (0 where nothing was hit); ``opacity`` (H, W)
-            float32; ``ms_march``, ``ms_deferred``: kernel times in milliseconds.
+            dict with ``rgb`` (H, W, 3) float32 in [0, 1]; ``ms_march``, ``ms_deferred``:
+            kernel times in milliseconds and ``ms`` their sum. With ``stats``: ``n_march``,
+            ``n_occ`` (H, W) int32 marching points and occupied samples per ray; ``depth``
+            (H, W) float32 world units along the ray (0 where nothing was hit); ``opacity``
+            (H, W) float32.
         """
         h, w, n = camera.height, camera.width, camera.width * camera.height
-        cam_buf = self._buffer(camera.packed())
-        out = self._outputs(n)
-        rgb_buf = cl.Buffer(self.runtime.context, cl.mem_flags.WRITE_ONLY, 12 * n)
-        ev_march = self._enqueue_march(camera, cam_buf, out)
-        bg = [F32(c) for c in background]
+        out = self._outputs(camera)
+        ev_march = self._enqueue_march(camera, out)
+        bg = [F32(c) for c in (background if background is not None else (1.0, 1.0, 1.0))]
         n_items = -(-n // (self.deferred_vec * DEFERRED_LOCAL)) * DEFERRED_LOCAL
-        ev_deferred = self._deferred(self.runtime.queue, (n_items,), (DEFERRED_LOCAL,), cam_buf,
-                                     np.int32(w), np.int32(n), out["feat"],
-                                     self._bufs["deferred"], *bg, rgb_buf)
-        feat = self._read(out["feat"], (n, 8), F32)
-        return {
-            "rgb": self._read(rgb_buf, (h, w, 3), F32),
-            "n_march": self._read(out["n_march"], (h, w), np.int32),
-            "n_occ": self._read(out["n_occ"], (h, w), np.int32),
-            "depth": self._read(out["depth"], (h, w), F32),
-            "opacity": feat[:, 7].reshape(h, w).copy(),
-            "ms_march": event_ms(ev_march), "ms_deferred": event_ms(ev_deferred),
-        }
+        ev_deferred = self._deferred(self.runtime.queue, (n_items,), (DEFERRED_LOCAL,),
+                                     out["cam"], np.int32(w), np.int32(n), out["feat"],
+                                     self._bufs["deferred"], *bg, out["rgb"])
+        result = {"rgb": self._read(out["rgb"], (h, w, 3), F32),
+                  "ms_march": event_ms(ev_march), "ms_deferred": event_ms(ev_deferred)}
+        result["ms"] = result["ms_march"] + result["ms_deferred"]
+        if stats:
+            result.update(
+                n_march=self._read(out["n_march"], (h, w), np.int32),
+                n_occ=self._read(out["n_occ"], (h, w), np.int32),
+                depth=self._read(out["depth"], (h, w), F32),
+                opacity=self._read(out["feat"], (n, 8), F32)[:, 7].reshape(h, w).copy())
+        return result

@@ -99,22 +99,54 @@ def g_distance(model, u: np.ndarray, exit_lev: np.ndarray, use_G: bool) -> np.nd
 
 # ---- empty-space skipping ---------------------------------------------------------
 
+def _in_cell(cfg, o, d, k, s, res, cell) -> np.ndarray:
+    """(M,) bool: lattice point k of each ray lies in ``cell`` at resolution ``res``
+    (bounded scenes: ``t_k = k * s``), computed exactly as the march places it."""
+    return np.all(_cells(_point_u(cfg, o, d, _lattice_g(k, s)), res) == cell, axis=1)
+
+
+def _first_outside(cfg, o, d, k_in, k_out, s, res, cell) -> np.ndarray:
+    """Bisection for the first lattice point outside ``cell``: ``k_in`` is inside it,
+    ``k_out > k_in`` outside. Per axis the float32 cell of ``t_k = k * s`` is monotone
+    in k (every operation is), so the points inside form one run of k."""
+    lo, hi = k_in.copy(), k_out.copy()
+    open_ = np.flatnonzero(hi - lo > 1)
+    while len(open_):
+        mid = lo[open_] + (hi[open_] - lo[open_]) // 2
+        inside = _in_cell(cfg, o[open_], d[open_], mid, s, res[open_], cell[open_])
+        lo[open_[inside]] = mid[inside]
+        hi[open_[~inside]] = mid[~inside]
+        open_ = open_[hi[open_] - lo[open_] > 1]
+    return hi
+
+
 def skip_bounded(model, k, t, o, d, u, exit_lev, g, s, g_end) -> np.ndarray:
     """Next lattice index (> k) after an empty point, closed form (Eq. 9).
 
     ``k_O`` is the first lattice point at or past the exit of the empty mip cell, ``k_G``
     the last one within G's empty ball of radius ``r = 2 g / G_res`` (world units).
+    ``k_O`` comes from the float32 exit distance, which is off by up to ~1e-7 / |d_a|
+    world units (many steps for a tiny direction component ``d_a``), so it is checked:
+    if lattice point ``k_O - 1`` is not in the empty cell any more, ``k_O`` becomes the
+    first point outside the cell, found by bisection (docs/ngprt.md "skip").
     """
     cfg = model.config
     res = cfg.L_C >> exit_lev
     h = F32(2.0) / res.astype(F32)
-    lo = _cells(u, res).astype(F32) * h[:, None] - F32(1.0)
+    cell = _cells(u, res)
+    lo = cell.astype(F32) * h[:, None] - F32(1.0)
     hi = lo + h[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         t_a = (np.where(d > 0, hi, lo) - o) / d
     t_exit = np.where(d != 0, t_a, F32(np.inf)).min(axis=1)
     lim = g_end / s + F32(2.0)      # past the ray's end any k will do: keeps ints small
     k_next = np.maximum(k + 1, np.ceil(np.minimum(t_exit / s - F32(1e-3), lim)).astype(np.int64))
+    check = np.flatnonzero(k_next - 1 > k)
+    out = check[~_in_cell(cfg, o[check], d[check], k_next[check] - 1, s, res[check],
+                          cell[check])]
+    if len(out):
+        k_next[out] = _first_outside(cfg, o[out], d[out], k[out], k_next[out] - 1, s,
+                                     res[out], cell[out])
     r = F32(2.0) * g.astype(F32) / F32(cfg.G_res)
     k_G = np.floor(np.minimum((t + r) / s, lim)).astype(np.int64)
     return np.where(g > 0, np.maximum(k_next, k_G), k_next)

@@ -1,0 +1,478 @@
+"""Training NDRF (PyTorch, CPU or CUDA): per-vertex features and the conv shader on fixed
+duplex meshes, distilled from a baked NGP-RT teacher.
+
+The K meshes are extracted once from the teacher (culled with the training cameras) into
+``RUN/meshes/``; every view's rays are cast into them once (Embree) and the hits kept in
+memory. A step takes one view (a full image or a random patch), gathers the vertex
+features by barycentric weights, runs :class:`NDRFShader` (the torch twin of
+:func:`clrender.ndrf.shader_ref.shade_reference`, docs/ndrf.md) and minimises the MSE.
+The first half of the iterations uses teacher renderings of distillation views, the second
+half the training images (``distill=False``: training images only). Adam, learning rate
+decaying exponentially from 1e-3 to 1e-5.
+
+A run folder holds ``config.json`` (``"method": "ndrf"``, the NDRF, training and
+extraction configs, data and teacher, seed), ``meshes/``, ``distill.npz``,
+``checkpoint.pt`` (features, conv weights, optimiser state, step) and ``log.jsonl``.
+
+Examples:
+    >>> run = train("/tmp/scn_b", "/tmp/ndrf_b", teacher="/tmp/teacher.npz", preset="cpu")
+    >>> bake_run(run, "/tmp/ndrf_b.npz")
+
+References: NDRF (Wan et al., CVPR 2023) §3.3, §4.1 "Optimization Details"; supplement §2.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from ..atomic import atomic_write
+from .baked import NDRFModel, save_baked
+from .config import NDRFConfig, preset as ndrf_preset
+from .init import initial_model, load_meshes
+from .mesh import ExtractConfig, extract_preset
+from .hits import HitCaster
+from .shader_ref import F32
+
+# The options a benchmark row may set, and their types.
+MODEL_OPTIONS = {"thresholds": list, "kernel_size": int, "distill": bool}
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation settings (§3.3, §4.1); presets change sizes, never the method.
+
+    Attributes:
+        iterations: optimiser steps (paper: 200k).
+        distill: first ``distill_fraction`` of the steps on teacher renderings of
+            ``n_distill`` distillation views, the rest on the training images; False:
+            training images only (the "no distillation" ablation).
+        n_distill: distillation views (paper: 1000).
+        distill_fraction: share of the iterations on distillation views (paper: half).
+        patch: side of the random square patch a step shades; 0: the full image.
+        lr, lr_final: Adam learning rate, decaying exponentially from lr to lr_final.
+        betas, eps: Adam's.
+        extract: the mesh extraction preset (:data:`clrender.ndrf.mesh.PRESETS`).
+        face_budget: faces per mesh after decimation; None: the extraction preset's.
+        checkpoint_every, log_every: in iterations.
+    """
+
+    iterations: int = 200_000
+    distill: bool = True
+    n_distill: int = 1000
+    distill_fraction: float = 0.5
+    patch: int = 0
+    lr: float = 1e-3
+    lr_final: float = 1e-5
+    betas: tuple = (0.9, 0.999)
+    eps: float = 1e-8
+    extract: str = "paper"
+    face_budget: int | None = None
+    checkpoint_every: int = 5000
+    log_every: int = 100
+
+
+TRAIN_PRESETS: dict[str, TrainConfig] = {
+    "paper": TrainConfig(),
+    "cpu": TrainConfig(iterations=3000, n_distill=200, patch=64, extract="cpu",
+                       face_budget=60_000, checkpoint_every=500, log_every=25),
+    "tiny": TrainConfig(iterations=400, n_distill=24, patch=0, extract="tiny",
+                        checkpoint_every=400, log_every=10),
+}
+
+
+def configs(preset: str, iterations: int | None = None, train_config: TrainConfig | None = None,
+            **options):
+    """``(NDRFConfig, TrainConfig, ExtractConfig)`` of ``preset`` with the model options
+    (``thresholds``, ``kernel_size``, ``distill``) and an iteration count applied;
+    ``train_config`` replaces the preset's training config."""
+    unknown = sorted(set(options) - set(MODEL_OPTIONS))
+    if unknown:
+        raise ValueError(f"unknown NDRF options {unknown}; expected {sorted(MODEL_OPTIONS)}")
+    if preset not in TRAIN_PRESETS:
+        raise ValueError(f"unknown preset {preset!r}; presets: {sorted(TRAIN_PRESETS)}")
+    model_opts = {k: options[k] for k in ("thresholds", "kernel_size") if options.get(k) is not None}
+    cfg = ndrf_preset(preset, **model_opts)
+    tcfg = train_config or TRAIN_PRESETS[preset]
+    if options.get("distill") is not None:
+        tcfg = replace(tcfg, distill=bool(options["distill"]))
+    if iterations is not None:
+        tcfg = replace(tcfg, iterations=int(iterations))
+    budget = {} if tcfg.face_budget is None else {"face_budget": tcfg.face_budget}
+    return cfg, tcfg, extract_preset(tcfg.extract, **budget)
+
+
+def model_spec(preset: str, **options) -> dict:
+    """Everything but data, seed and teacher that determines a trained model (a cache key)."""
+    cfg, tcfg, ecfg = configs(preset, **options)
+    return {"model": cfg.to_dict(), "train": json.loads(json.dumps(asdict(tcfg))),
+            "extract": asdict(ecfg)}
+
+
+def pick_device(device=None) -> torch.device:
+    """``device`` or cuda when present, else cpu."""
+    if device is None:
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(device)
+
+
+def learning_rate(step: int, tcfg: TrainConfig) -> float:
+    """lr * (lr_final / lr) ** (step / iterations): exponential decay (§4.1)."""
+    return tcfg.lr * (tcfg.lr_final / tcfg.lr) ** (step / max(1, tcfg.iterations))
+
+
+# -- the torch shader (docs/ndrf.md; tested equal to shader_ref.shade_reference) ------------
+
+def view_encoding(dirs: torch.Tensor, n_freq: int) -> torch.Tensor:
+    """(..., 3) unit directions -> (..., 3 + 6 n_freq): d, then sin(2^i d), cos(2^i d)."""
+    parts = [dirs]
+    for i in range(n_freq):
+        a = float(2.0 ** i) * dirs
+        parts += [torch.sin(a), torch.cos(a)]
+    return torch.cat(parts, -1)
+
+
+def crop(tri, bary, y0: int, x0: int, ph: int, pw: int, halo: int):
+    """The hits of pixels [y0 - halo, y0 + ph + halo) x [x0 - halo, x0 + pw + halo).
+
+    Args:
+        tri: (K, H, W) int tensor, -1 = miss; bary: (K, H, W, 2) float32.
+    Returns:
+        tri (K, R, C) int64 (-1 also outside the image), bary (K, R, C, 2), inside (R, C)
+        bool (the pixel lies in the image), rows (R,) and cols (C,) clamped to the image,
+        with R = ph + 2 halo, C = pw + 2 halo.
+    """
+    H, W = tri.shape[1:]
+    rows = torch.arange(y0 - halo, y0 + ph + halo, device=tri.device)
+    cols = torch.arange(x0 - halo, x0 + pw + halo, device=tri.device)
+    inside = ((rows >= 0) & (rows < H))[:, None] & ((cols >= 0) & (cols < W))[None, :]
+    rows, cols = rows.clamp(0, H - 1), cols.clamp(0, W - 1)
+    t = tri[:, rows][:, :, cols].long()
+    return torch.where(inside, t, -1), bary[:, rows][:, :, cols], inside, rows, cols
+
+
+def camera_dirs(cam: torch.Tensor, rows: torch.Tensor, cols: torch.Tensor) -> torch.Tensor:
+    """(R, C, 3) float32 unit ray directions of pixels rows x cols of a packed camera
+    (``Camera.packed()``, (16,) float32), in the operation order of ``generate_rays``."""
+    fx, fy, cx, cy = cam[0], cam[1], cam[2], cam[3]
+    R = cam[4:13].reshape(3, 3)
+    a = ((cols.float() + 0.5 - cx) / fx)[None, :].expand(len(rows), len(cols))
+    b = (-((rows.float() + 0.5 - cy) / fy))[:, None].expand(len(rows), len(cols))
+    d = [R[i, 0] * a + R[i, 1] * b - R[i, 2] for i in range(3)]
+    norm = torch.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    return torch.stack([di / norm for di in d], -1)
+
+
+class NDRFShader(torch.nn.Module):
+    """Per-vertex features of K fixed meshes and the conv shader, differentiable.
+
+    Parameters (the checkpoint's state dict): ``features.k`` (V_k, 8) and ``conv0``,
+    ``conv1`` (torch layout (out, in, S, S)). Vertices and faces are fixed buffers.
+    """
+
+    def __init__(self, config: NDRFConfig, meshes, features, convs):
+        super().__init__()
+        self.config = config
+        self.features = torch.nn.ParameterList(
+            [torch.nn.Parameter(torch.as_tensor(np.asarray(f, F32))) for f in features])
+        for k, (v, f) in enumerate(meshes):
+            self.register_buffer(f"vertices_{k}", torch.as_tensor(np.asarray(v, F32)),
+                                 persistent=False)
+            self.register_buffer(f"faces_{k}", torch.as_tensor(np.asarray(f, np.int64)),
+                                 persistent=False)
+        S, H = config.kernel_size, config.hidden
+        self.conv0 = torch.nn.Conv2d(config.c_in, H, S)
+        self.conv1 = torch.nn.Conv2d(H, 3, S)
+        with torch.no_grad():
+            for conv, (w, b) in zip((self.conv0, self.conv1), convs):
+                conv.weight.copy_(torch.as_tensor(np.transpose(w, (3, 2, 0, 1))))
+                conv.bias.copy_(torch.as_tensor(b))
+
+    @classmethod
+    def from_model(cls, model: NDRFModel) -> "NDRFShader":
+        """The shader of a (baked or initial) :class:`NDRFModel`."""
+        K, a = model.config.K, model.arrays
+        return cls(model.config, [model.mesh(k)[:2] for k in range(K)],
+                   [model.mesh(k)[2] for k in range(K)],
+                   [(a["conv0_w"], a["conv0_b"]), (a["conv1_w"], a["conv1_b"])])
+
+    def to_arrays(self, background) -> dict:
+        """The baked arrays (docs/ndrf.md): conv weights as [dy, dx, in, out]."""
+        out = {}
+        for k in range(self.config.K):
+            out[f"vertices_{k}"] = getattr(self, f"vertices_{k}").cpu().numpy().astype(F32)
+            out[f"faces_{k}"] = getattr(self, f"faces_{k}").cpu().numpy().astype(np.int32)
+            out[f"features_{k}"] = self.features[k].detach().cpu().numpy().astype(F32)
+        for i, conv in enumerate((self.conv0, self.conv1)):
+            w = conv.weight.detach().cpu().numpy()
+            out[f"conv{i}_w"] = np.ascontiguousarray(np.transpose(w, (2, 3, 1, 0)), F32)
+            out[f"conv{i}_b"] = conv.bias.detach().cpu().numpy().astype(F32)
+        out["background"] = np.asarray(background, F32).reshape(3)
+        return out
+
+    def screen_buffer(self, tri, bary, dirs, inside) -> torch.Tensor:
+        """(R, C, C_in): features, hit positions, view encoding (zeros outside ``inside``)."""
+        hit = tri >= 0
+        safe = tri.clamp(min=0)
+        feats, pos = [], []
+        for k in range(self.config.K):
+            idx = getattr(self, f"faces_{k}")[safe[k]]                      # (R, C, 3)
+            u, v = bary[k, ..., 0:1], bary[k, ..., 1:2]
+            w = 1.0 - u - v
+            for values, parts in ((self.features[k], feats),
+                                  (getattr(self, f"vertices_{k}"), pos)):
+                g = w * values[idx[..., 0]] + u * values[idx[..., 1]] + v * values[idx[..., 2]]
+                parts.append(torch.where(hit[k][..., None], g, 0.0))
+        view = view_encoding(dirs, self.config.n_freq) * inside[..., None]
+        return torch.cat(feats + pos + [view], -1)
+
+    def forward(self, tri, bary, dirs, inside, background) -> torch.Tensor:
+        """Shade a window of pixels with a halo of S - 1 pixels on every side.
+
+        Args:
+            tri (K, R, C) int64, -1 = miss; bary (K, R, C, 2); dirs (R, C, 3) unit ray
+            directions; inside (R, C) bool (halo pixels outside the image: False), as
+            :func:`crop` gives them; background (3,) RGB.
+        Returns:
+            (R - 2 (S - 1), C - 2 (S - 1), 3) composited RGB of the window's interior:
+            layer 0 is a valid conv over the window (its bottom/right padding), its outputs
+            outside the image are zeroed, then layer 1 (top/left padding), sigmoid.
+        """
+        halo = self.config.kernel_size - 1
+        x = self.screen_buffer(tri, bary, dirs, inside).permute(2, 0, 1)[None]
+        h = torch.relu(self.conv0(x))
+        h = h * inside[:h.shape[2], :h.shape[3]]
+        s = torch.sigmoid(self.conv1(h))[0].permute(1, 2, 0)
+        R, C = tri.shape[1:]
+        cov = (tri[:, halo:R - halo, halo:C - halo] >= 0).any(0)[..., None].to(s.dtype)
+        return cov * s + (1.0 - cov) * background
+
+
+def shade_image(shader: NDRFShader, tri, bary, dirs, background) -> torch.Tensor:
+    """A full frame, as :func:`clrender.ndrf.shader_ref.shade_reference` (torch tensors:
+    tri (K, H, W), bary (K, H, W, 2), dirs (H, W, 3); returns (H, W, 3))."""
+    H, W = tri.shape[1:]
+    halo = shader.config.kernel_size - 1
+    t, b, inside, rows, cols = crop(tri, bary, 0, 0, H, W, halo)
+    return shader(t, b, dirs[rows][:, cols], inside, torch.as_tensor(background))
+
+
+@dataclass
+class ViewSet:
+    """Views with their hits cast once: tri (N, K, H, W) int32, bary (N, K, H, W, 2)
+    float32, images (N, H, W, 3) targets, cams (N, 16) packed cameras, on one device."""
+
+    tri: torch.Tensor
+    bary: torch.Tensor
+    images: torch.Tensor
+    cams: torch.Tensor
+
+    @classmethod
+    def build(cls, meshes, cameras, images, device) -> "ViewSet":
+        caster = HitCaster(meshes)
+        hits = [caster.cast_camera(c) for c in cameras]
+        as_t = lambda a: torch.as_tensor(np.ascontiguousarray(a), device=device)  # noqa: E731
+        return cls(as_t(np.stack([h.tri for h in hits])), as_t(np.stack([h.bary for h in hits])),
+                   as_t(images), as_t(np.stack([c.packed() for c in cameras])))
+
+    def __len__(self) -> int:
+        return len(self.tri)
+
+    @property
+    def height(self) -> int:
+        return self.tri.shape[2]
+
+    @property
+    def width(self) -> int:
+        return self.tri.shape[3]
+
+    def window(self, i: int, y0: int, x0: int, ph: int, pw: int, halo: int):
+        """:func:`crop` of view i with its ray directions: (tri, bary, dirs, inside)."""
+        t, b, inside, rows, cols = crop(self.tri[i], self.bary[i], y0, x0, ph, pw, halo)
+        return t, b, camera_dirs(self.cams[i], rows, cols), inside
+
+
+# -- training -------------------------------------------------------------------------------
+
+def _teacher_info(teacher):
+    """(loaded NGP-RT model, JSON-ready identity of the teacher file)."""
+    from ..methods import load
+
+    if hasattr(teacher, "method"):
+        model, ident = teacher, {"path": None}
+    else:
+        path = Path(teacher).resolve()
+        model = load(path)
+        st = path.stat()
+        ident = {"path": str(path), "bytes": st.st_size, "mtime_ns": st.st_mtime_ns}
+    if model.method != "ngprt":
+        raise ValueError(f"teacher {ident['path']}: a teacher must be a baked NGP-RT model, "
+                         f"this is {model.method!r}")
+    return model, ident
+
+
+def _meshes(out: Path, reuse: bool, teacher, cfg, ecfg, cameras, progress):
+    """K (vertices, faces) from ``out/meshes`` (``reuse``) or freshly extracted there."""
+    from .mesh import extract_duplex, write_meshes
+
+    mesh_dir = out / "meshes"
+    if not (reuse and (mesh_dir / "report.json").is_file()):
+        meshes, report = extract_duplex(teacher, ecfg, thresholds=cfg.thresholds,
+                                        cameras=cameras, progress=progress)
+        empty = [k for k, m in enumerate(meshes) if len(m.faces) == 0]
+        if empty:
+            raise ValueError(f"NDRF extraction: meshes {empty} (thresholds "
+                             f"{[cfg.thresholds[k] for k in empty]}) have no face left "
+                             f"after culling; report: {report['meshes']}")
+        write_meshes(meshes, report, mesh_dir)
+    thresholds, meshes = load_meshes(mesh_dir)
+    if thresholds != cfg.thresholds:
+        raise ValueError(f"{mesh_dir}: meshes at thresholds {thresholds}, the config has "
+                         f"{cfg.thresholds}")
+    return meshes
+
+
+def _config_json(ds, data, cfg, tcfg, ecfg, teacher_id, preset, seed) -> dict:
+    conf = {"method": "ndrf", "model": cfg.to_dict(), "train": asdict(tcfg),
+            "extract": asdict(ecfg),
+            "data": None if hasattr(data, "images") else str(Path(data).resolve()),
+            "teacher": teacher_id, "preset": preset, "seed": int(seed),
+            "background": [float(v) for v in np.asarray(ds.background).reshape(3)]}
+    return json.loads(json.dumps(conf))
+
+
+def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None,
+          seed: int = 0, device=None, progress: bool = True,
+          train_config: TrainConfig | None = None, **options) -> Path:
+    """Train an NDRF model on the dataset ``data`` (folder or loaded train Dataset) from the
+    baked NGP-RT ``teacher`` (path or loaded model) into the run folder ``out``.
+
+    Args:
+        preset: "tiny", "cpu" or "paper" (:data:`TRAIN_PRESETS`, extraction preset).
+        iterations: overrides the preset's count.
+        train_config: replaces the preset's :class:`TrainConfig`.
+        device: torch device; default cuda when present.
+        **options: :data:`MODEL_OPTIONS` (thresholds, kernel_size, distill).
+    An existing run with the same config.json is resumed (meshes, distillation views and
+    checkpoint reused). Returns the run folder.
+    """
+    dev, out = pick_device(device), Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(seed)
+    if hasattr(data, "images"):
+        ds = data
+    else:
+        from ..data import load_dataset
+        ds = load_dataset(data, split="train")
+    cfg, tcfg, ecfg = configs(preset, iterations, train_config, **options)
+    teacher_model, teacher_id = _teacher_info(teacher)
+    conf = _config_json(ds, data, cfg, tcfg, ecfg, teacher_id, preset, seed)
+    conf_path, ckpt = out / "config.json", out / "checkpoint.pt"
+    resume = conf_path.is_file() and json.loads(conf_path.read_text()) == conf
+    if not resume:
+        for stale in (conf_path, ckpt, out / "meshes" / "report.json"):
+            stale.unlink(missing_ok=True)
+    meshes = _meshes(out, resume, teacher_model, cfg, ecfg, ds.cameras, progress)
+    atomic_write(conf_path, lambda tmp: tmp.write_text(json.dumps(conf, indent=2)))
+
+    bg = np.asarray(ds.background, np.float32).reshape(3)
+    shader = NDRFShader.from_model(initial_model(cfg, meshes, seed, bg)).to(dev)
+    views = {"train": ViewSet.build(meshes, ds.cameras, ds.images, dev)}
+    if tcfg.distill and tcfg.n_distill > 0:
+        from .distill import cached_distillation
+
+        cams, images = cached_distillation(out, teacher_model, ds.cameras, tcfg.n_distill,
+                                           seed, bg, json.dumps(teacher_id, sort_keys=True),
+                                           progress=progress)
+        views["distill"] = ViewSet.build(meshes, cams, images, dev)
+    opt = torch.optim.Adam(shader.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas),
+                           eps=tcfg.eps)
+    start = 0
+    if resume and ckpt.is_file():
+        state = torch.load(ckpt, map_location=dev, weights_only=True)
+        shader.load_state_dict(state["model"])
+        opt.load_state_dict(state["optimizer"])
+        start = int(state["step"])
+    _loop(shader, opt, views, torch.as_tensor(bg, device=dev), start, tcfg, seed, out, progress)
+    return out
+
+
+def _phase(step: int, tcfg: TrainConfig, views: dict) -> str:
+    if "distill" in views and step < int(round(tcfg.distill_fraction * tcfg.iterations)):
+        return "distill"
+    return "train"
+
+
+def _loop(shader, opt, views, bg, start, tcfg, seed, out, progress):
+    from tqdm import tqdm
+
+    t0 = time.time()
+    bar = tqdm(range(start, tcfg.iterations), initial=start, total=tcfg.iterations,
+               disable=not progress, desc="ndrf", dynamic_ncols=True)
+    with open(out / "log.jsonl", "a" if start else "w") as log:
+        for step in bar:
+            # One generator per step: the same views and patches whether resumed or not.
+            rng = np.random.default_rng([seed, step])
+            phase = _phase(step, tcfg, views)
+            vs = views[phase]
+            i = int(rng.integers(len(vs)))
+            ph, pw = (vs.height, vs.width) if tcfg.patch <= 0 else \
+                (min(tcfg.patch, vs.height), min(tcfg.patch, vs.width))
+            y0, x0 = int(rng.integers(vs.height - ph + 1)), int(rng.integers(vs.width - pw + 1))
+            lr = learning_rate(step, tcfg)
+            for g in opt.param_groups:
+                g["lr"] = lr
+            inputs = vs.window(i, y0, x0, ph, pw, shader.config.kernel_size - 1)
+            rgb = shader(*inputs, background=bg)
+            target = vs.images[i, y0:y0 + ph, x0:x0 + pw].float()
+            loss = F.mse_loss(rgb, target)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            mse = float(loss.detach())
+            psnr = -10.0 * math.log10(max(mse, 1e-10))
+            bar.set_postfix(phase=phase, psnr=f"{psnr:.2f}")
+            if step % tcfg.log_every == 0 or step == tcfg.iterations - 1:
+                log.write(json.dumps({"step": step, "phase": phase, "loss": mse, "psnr": psnr,
+                                      "lr": lr, "view": i, "seconds": time.time() - t0}) + "\n")
+                log.flush()
+            if (step + 1) % tcfg.checkpoint_every == 0 or step == tcfg.iterations - 1:
+                save_checkpoint(out / "checkpoint.pt", shader, opt, step + 1)
+
+
+def save_checkpoint(path: Path, shader, opt, step: int) -> None:
+    """Atomic: features per mesh, conv weights, optimiser state and the step count."""
+    state = {"model": shader.state_dict(), "optimizer": opt.state_dict(), "step": int(step)}
+    atomic_write(path, lambda tmp: torch.save(state, tmp))
+
+
+def load_run(run_dir, device=None) -> tuple[NDRFShader, dict]:
+    """The trained shader of a run folder (on ``device``, default cpu) and its config.json."""
+    run_dir = Path(run_dir)
+    conf_path = run_dir / "config.json"
+    conf = json.loads(conf_path.read_text())
+    if conf.get("method") != "ndrf":
+        raise ValueError(f"{conf_path}: method is {conf.get('method')!r}, expected 'ndrf'")
+    cfg = NDRFConfig.from_dict(conf["model"], where=str(conf_path))
+    _, meshes = load_meshes(run_dir / "meshes")
+    bg = np.asarray(conf["background"], np.float32)
+    shader = NDRFShader.from_model(initial_model(cfg, meshes, 0, bg))
+    state = torch.load(run_dir / "checkpoint.pt", map_location="cpu", weights_only=True)
+    shader.load_state_dict(state["model"])
+    return shader.to(pick_device(device or "cpu")).eval(), conf
+
+
+def bake_run(run_dir, out_path) -> Path:
+    """Bake the checkpoint of ``run_dir`` into an NDRF file at ``out_path`` (atomically;
+    conv weights transposed to [dy, dx, in, out] as docs/ndrf.md). Returns the path."""
+    shader, conf = load_run(run_dir)
+    model = NDRFModel(shader.config, shader.to_arrays(conf["background"]))
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    return save_baked(model, out_path)

@@ -1,0 +1,207 @@
+"""NDRF training (clrender/ndrf/train.py, clrender/ndrf/distill.py).
+
+Tolerances:
+- torch shader vs the numpy reference ``shade_reference`` (float32 both): max abs RGB
+  difference 1e-5, full frames and random patches (border patches included), K = 1, 2, 3,
+  kernel sizes 2 and 1;
+- model -> torch shader -> baked arrays: bit-equal;
+- distillation cameras: r, theta, phi within the training cameras' ranges up to 1e-9 rad /
+  world units, optical axis through the centre within 1e-9 (cosine);
+- end-to-end (slow): the baked student beats a constant colour (the mean training pixel) by
+  at least 5 dB PSNR on the test views.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from clrender.camera import Camera, generate_rays, look_at
+from clrender.ndrf.config import NDRFConfig
+from clrender.ndrf.distill import (azimuth_arc, cached_distillation, distillation_cameras,
+                                   load_distill, spherical_frame, to_spherical)
+from clrender.ndrf.hits import HitCaster
+from clrender.ndrf.random_model import random_ndrf_model
+from clrender.ndrf.shader_ref import shade_reference
+from clrender.ndrf.train import (MODEL_OPTIONS, NDRFShader, configs, crop, learning_rate,
+                                 model_spec, shade_image, TrainConfig)
+
+TOL = 1e-5
+THRESHOLDS = {1: (1e-2,), 2: (1e-4, 1e-2), 3: (1e-4, 1e-3, 1e-2)}
+
+
+def _camera(seed: int, size=(37, 29)) -> Camera:
+    rng = np.random.default_rng(seed)
+    eye = rng.normal(size=3)
+    eye = 2.6 * eye / np.linalg.norm(eye)
+    w, h = size
+    return Camera.from_fov(np.deg2rad(45.0), w, h, look_at(eye, rng.uniform(-0.1, 0.1, 3)))
+
+
+@pytest.mark.parametrize("S", [2, 1])
+@pytest.mark.parametrize("K", [1, 2, 3])
+def test_torch_shader_matches_reference(K, S):
+    model = random_ndrf_model(NDRFConfig(thresholds=THRESHOLDS[K], kernel_size=S), seed=K + 7 * S)
+    cam = _camera(K)
+    hits = HitCaster(model).cast_camera(cam)
+    assert (hits.tri >= 0).any() and (hits.tri < 0).any()      # hits and misses both
+    _, dirs = generate_rays(cam)
+    ref = shade_reference(model, hits.tri, hits.bary, dirs, model.background)
+    shader = NDRFShader.from_model(model)
+    tri, bary = torch.as_tensor(hits.tri), torch.as_tensor(hits.bary)
+    with torch.no_grad():
+        out = shade_image(shader, tri, bary, torch.as_tensor(dirs), model.background).numpy()
+    assert out.shape == ref.shape
+    np.testing.assert_allclose(out, ref, rtol=0, atol=TOL)
+    # Patches, the training path: a window with an S-1 halo, cropped to its interior.
+    H, W = hits.tri.shape[1:]
+    halo = S - 1
+    for y0, x0, ph, pw in [(0, 0, 8, 8), (H - 7, W - 9, 7, 9), (5, 11, 10, 6), (0, W - 4, H, 4)]:
+        t, b, inside, rows, cols = crop(tri, bary, y0, x0, ph, pw, halo)
+        with torch.no_grad():
+            patch = shader(t, b, torch.as_tensor(dirs)[rows][:, cols], inside,
+                           torch.as_tensor(model.background)).numpy()
+        np.testing.assert_allclose(patch, ref[y0:y0 + ph, x0:x0 + pw], rtol=0, atol=TOL)
+
+
+def test_shader_round_trip_is_exact():
+    model = random_ndrf_model(NDRFConfig(), seed=3)
+    arrays = NDRFShader.from_model(model).to_arrays(model.background)
+    assert set(arrays) == set(model.arrays)
+    for name, a in model.arrays.items():
+        assert arrays[name].dtype == a.dtype and np.array_equal(arrays[name], a), name
+
+
+def test_shader_gradients_reach_features_and_weights():
+    model = random_ndrf_model(NDRFConfig(), seed=4)
+    shader = NDRFShader.from_model(model)
+    cam = _camera(5)
+    hits = HitCaster(model).cast_camera(cam)
+    _, dirs = generate_rays(cam)
+    out = shade_image(shader, torch.as_tensor(hits.tri), torch.as_tensor(hits.bary),
+                      torch.as_tensor(dirs), model.background)
+    out.sum().backward()
+    for name, p in shader.named_parameters():
+        assert p.grad is not None and torch.isfinite(p.grad).all(), name
+        assert p.grad.abs().sum() > 0, name
+    # Vertices of faces no ray hits get no gradient.
+    seen = np.unique(model.arrays["faces_0"][hits.tri[0][hits.tri[0] >= 0]])
+    unseen = np.setdiff1d(np.arange(len(model.arrays["vertices_0"])), seen)
+    assert shader.features[0].grad[unseen].abs().sum() == 0
+
+
+def _ring_cameras(az_deg, el_deg, radius, up=(0.0, 0.0, 1.0)):
+    cams = []
+    for i, (a, e) in enumerate(zip(np.deg2rad(az_deg), np.deg2rad(el_deg))):
+        eye = radius[i] * np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])
+        cams.append(Camera.from_fov(0.7, 16, 12, look_at(eye, (0, 0, 0), up)))
+    return cams
+
+
+@pytest.mark.parametrize("az, arc", [([-40.0, -10.0, 5.0, 30.0], 70.0),       # across phi = 0
+                                     ([150.0, 170.0, -170.0, -160.0], 50.0),  # across phi = pi
+                                     ([10.0, 100.0, 200.0, 300.0], 260.0)])   # around
+def test_distillation_cameras_within_ranges(az, arc):
+    el = [10.0, 60.0, 35.0, 20.0]
+    radius = [2.5, 3.0, 2.8, 3.4]
+    train = _ring_cameras(az, el, radius)
+    views = distillation_cameras(train, 300, seed=2)
+    assert len(views) == 300
+    frame = spherical_frame(train)
+    np.testing.assert_allclose(frame[2], [0, 0, 1], atol=1e-9)    # no roll: exact up
+    r0, t0, p0 = to_spherical(np.stack([c.origin for c in train]), frame)
+    r, t, p = to_spherical(np.stack([c.origin for c in views]), frame)
+    eps = 1e-9
+    assert r.min() >= r0.min() - eps and r.max() <= r0.max() + eps
+    assert t.min() >= t0.min() - eps and t.max() <= t0.max() + eps
+    start, width = azimuth_arc(p0)
+    assert np.isclose(np.rad2deg(width), arc)
+    offset = np.mod(p - start, 2 * np.pi)
+    assert offset.max() <= width + eps
+    assert offset.max() > 0.9 * width and offset.min() < 0.1 * width      # spans the arc
+    for c in views:
+        assert (c.fx, c.width, c.height) == (train[0].fx, train[0].width, train[0].height)
+        forward = -c.c2w[:3, 2]
+        to_centre = -c.origin / np.linalg.norm(c.origin)
+        assert forward @ to_centre >= 1.0 - eps
+
+
+def test_azimuth_arc_wraps():
+    start, width = azimuth_arc(np.deg2rad([170.0, -170.0, 175.0]))
+    assert np.isclose(np.rad2deg(start), 170.0) and np.isclose(np.rad2deg(width), 20.0)
+
+
+def test_distillation_cache(tmp_path):
+    model = random_ndrf_model(NDRFConfig(), seed=1)
+    train = _ring_cameras([0.0, 90.0, 180.0], [20.0, 30.0, 40.0], [3.0, 3.0, 3.0])
+    from clrender.ndrf import distill
+
+    calls = []
+
+    def fake_render(teacher, cams, background, device=None, progress=True):
+        calls.append(len(cams))
+        return np.full((len(cams), cams[0].height, cams[0].width, 3), 0.25, np.float32)
+
+    orig = distill.render_teacher
+    distill.render_teacher = fake_render
+    try:
+        cams, images = cached_distillation(tmp_path, model, train, 5, 0, (1, 1, 1), "t")
+        again, images2 = cached_distillation(tmp_path, model, train, 5, 0, (1, 1, 1), "t")
+        cached_distillation(tmp_path, model, train, 5, 1, (1, 1, 1), "t")     # other seed
+    finally:
+        distill.render_teacher = orig
+    assert calls == [5, 5]
+    assert images.shape == (5, 12, 16, 3) and np.array_equal(images, images2)
+    assert all(np.array_equal(a.c2w, b.c2w) for a, b in zip(cams, again))
+    _, _, spec = load_distill(tmp_path / "distill.npz")
+    assert spec["seed"] == 1
+
+
+def test_configs_and_spec():
+    assert set(MODEL_OPTIONS) == {"thresholds", "kernel_size", "distill"}
+    cfg, tcfg, ecfg = configs("paper")
+    assert tcfg.iterations == 200_000 and tcfg.n_distill == 1000 and ecfg.N == 512
+    assert (tcfg.lr, tcfg.lr_final, tuple(tcfg.betas)) == (1e-3, 1e-5, (0.9, 0.999))
+    cfg, tcfg, _ = configs("tiny", thresholds=[1e-3], kernel_size=1, distill=False)
+    assert cfg.K == 1 and cfg.kernel_size == 1 and not tcfg.distill
+    spec = model_spec("cpu", kernel_size=1)
+    assert spec["model"]["kernel_size"] == 1 and json.loads(json.dumps(spec)) == spec
+    assert spec != model_spec("cpu") and model_spec("cpu") == model_spec("cpu")
+    with pytest.raises(ValueError, match="unknown NDRF options"):
+        configs("cpu", hidden=3)
+    t = TrainConfig(iterations=100)
+    assert learning_rate(0, t) == 1e-3 and np.isclose(learning_rate(100, t), 1e-5)
+    assert np.isclose(learning_rate(50, t), 1e-4)
+
+
+@pytest.mark.slow
+def test_tiny_end_to_end(tmp_path):
+    from clrender.data import load_dataset, make_scene
+    from clrender.evaluate import evaluate
+    from clrender.metrics import psnr
+    from clrender.ngprt.bake import bake_run as bake_teacher
+    from clrender.ngprt.train import train as train_teacher
+    from clrender.ndrf.baked import load_baked
+    from clrender.ndrf.train import bake_run, train
+
+    scene = make_scene("bounded", tmp_path / "scene", seed=1, n_train=12, n_test=2,
+                       width=40, height=40)
+    teacher = bake_teacher(train_teacher(scene, tmp_path / "teacher", preset="tiny",
+                                         progress=False), tmp_path / "teacher.npz")
+    run = train(scene, tmp_path / "run", teacher=teacher, preset="tiny", progress=False)
+    conf = json.loads((run / "config.json").read_text())
+    assert conf["method"] == "ndrf"
+    assert (run / "meshes" / "report.json").is_file() and (run / "distill.npz").is_file()
+    log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
+    assert {e["phase"] for e in log} == {"distill", "train"}
+    baked = bake_run(run, tmp_path / "ndrf.npz")
+    model = load_baked(baked)
+    assert model.config.K == 2
+    result = evaluate(baked, scene)
+    train_ds, test_ds = load_dataset(scene, "train"), load_dataset(scene, "test")
+    mean = train_ds.images.reshape(-1, 3).mean(0)
+    constant = np.mean([psnr(np.broadcast_to(mean, gt.shape).astype(np.float32), gt)
+                        for gt in test_ds.images])
+    assert result["mean"]["psnr"] >= constant + 5.0, (result["mean"]["psnr"], constant)
