@@ -133,6 +133,9 @@ def _mutants(base, tmp: Path):
         yield label, _write(out(), man, arr if arr is not None else arrays)
     for gamma in GAMMAS:
         yield f"gamma={_show(gamma)}", _write(out(), dict(manifest, gamma=gamma), arrays)
+    for factor in (0.99, 1.01):     # either side of the lattice bound (the longest march)
+        gamma = _config().min_gamma * factor
+        yield f"gamma=min_gamma*{factor}", _write(out(), dict(manifest, gamma=gamma), arrays)
     yield "no gamma", _write(out(), {k: v for k, v in manifest.items() if k != "gamma"}, arrays)
     for label, man, arr in _array_mutants(manifest, arrays):
         yield label, _write(out(), man, arr)
@@ -174,12 +177,13 @@ def test_every_mutant_is_refused_clearly_or_loads(outcomes):
     refused = {label for label, _, e in outcomes if e is not None}
     loaded = {label for label, _, e in outcomes if e is None}
     assert len(outcomes) > 300 and len(loaded) >= 10
+    assert "gamma=min_gamma*1.01" in loaded
     # The holes this file was written for.
     for label in ("gamma=1e-09", "gamma=5e-324", "gamma=10**400", "gamma='1.0'", "gamma=True",
                   "gamma=1e+300", "config.L_C=0", "config.L_C=1.5", "config.coarse_block=0",
                   "config.L=30", "config.L=10**30", "config.far=inf", "config.near=nan",
                   "config.G_res=0", "config.aux_levels=0", "config.L=True",
-                  "config.aux_log2_T=30", "config.aux_levels=10**30",
+                  "config.aux_log2_T=30", "config.aux_levels=10**30", "gamma=min_gamma*0.99",
                   "config.aux_min_res=1000000", "config.far=1e+300", "config.far=1e+30"):
         assert label in refused, label
 
@@ -210,7 +214,8 @@ def test_loaded_mutants_render_in_bounded_time(outcomes):
                               capture_output=True, text=True, env=env, cwd=root,
                               timeout=RENDER_TIMEOUT_S)
     except subprocess.TimeoutExpired as e:
-        done = (e.stdout or b"").decode() if isinstance(e.stdout, bytes) else (e.stdout or "")
+        proc, done = None, e.stdout.decode() if isinstance(e.stdout, bytes) else e.stdout or ""
+    if proc is None:
         n = done.count("RENDERED")
         pytest.fail(f"rendering the loaded mutants took over {RENDER_TIMEOUT_S} s; stuck at "
                     f"{loaded[n][0] if n < len(loaded) else '?'} after {n} renders")

@@ -13,6 +13,7 @@ Tolerances:
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -25,8 +26,8 @@ from clrender.ndrf.distill import (azimuth_arc, cached_distillation, distillatio
 from clrender.ndrf.hits import HitCaster
 from clrender.ndrf.random_model import random_ndrf_model
 from clrender.ndrf.shader_ref import shade_reference
-from clrender.ndrf.train import (MODEL_OPTIONS, NDRFShader, configs, crop, learning_rate,
-                                 model_spec, shade_image, TrainConfig)
+from clrender.ndrf.train import (MODEL_OPTIONS, NDRFShader, TrainConfig, configs, crop,
+                                 learning_rate, model_spec, shade_image)
 
 TOL = 1e-5
 THRESHOLDS = {1: (1e-2,), 2: (1e-4, 1e-2), 3: (1e-4, 1e-3, 1e-2)}
@@ -133,7 +134,7 @@ def test_azimuth_arc_wraps():
     assert np.isclose(np.rad2deg(start), 170.0) and np.isclose(np.rad2deg(width), 20.0)
 
 
-def test_distillation_cache(tmp_path):
+def test_distillation_cache(tmp_path, monkeypatch):
     model = random_ndrf_model(NDRFConfig(), seed=1)
     train = _ring_cameras([0.0, 90.0, 180.0], [20.0, 30.0, 40.0], [3.0, 3.0, 3.0])
     from clrender.ndrf import distill
@@ -144,14 +145,10 @@ def test_distillation_cache(tmp_path):
         calls.append(len(cams))
         return np.full((len(cams), cams[0].height, cams[0].width, 3), 0.25, np.float32)
 
-    orig = distill.render_teacher
-    distill.render_teacher = fake_render
-    try:
-        cams, images = cached_distillation(tmp_path, model, train, 5, 0, (1, 1, 1), "t")
-        again, images2 = cached_distillation(tmp_path, model, train, 5, 0, (1, 1, 1), "t")
-        cached_distillation(tmp_path, model, train, 5, 1, (1, 1, 1), "t")     # other seed
-    finally:
-        distill.render_teacher = orig
+    monkeypatch.setattr(distill, "render_teacher", fake_render)
+    cams, images = cached_distillation(tmp_path, model, train, 5, 0, (1, 1, 1), "t")
+    again, images2 = cached_distillation(tmp_path, model, train, 5, 0, (1, 1, 1), "t")
+    cached_distillation(tmp_path, model, train, 5, 1, (1, 1, 1), "t")         # other seed
     assert calls == [5, 5]
     assert images.shape == (5, 12, 16, 3) and np.array_equal(images, images2)
     assert all(np.array_equal(a.c2w, b.c2w) for a, b in zip(cams, again))
@@ -174,6 +171,75 @@ def test_configs_and_spec():
     t = TrainConfig(iterations=100)
     assert learning_rate(0, t) == 1e-3 and np.isclose(learning_rate(100, t), 1e-5)
     assert np.isclose(learning_rate(50, t), 1e-4)
+
+
+@pytest.fixture(scope="module")
+def small_run_inputs():
+    """A random NGP-RT teacher (thin shells) and an in-memory 24x20 dataset of 6 views."""
+    from clrender.data import Dataset
+    from clrender.ngprt.config import preset as ngprt_preset
+    from clrender.ngprt.random_model import random_baked_model
+
+    teacher = random_baked_model(ngprt_preset("tiny", variant="sum"), seed=2)
+    cams = _ring_cameras(np.arange(6) * 60.0, [20.0, 40.0] * 3, [2.8] * 6)
+    cams = [c.scaled_to(24, 20) for c in cams]
+    rng = np.random.default_rng(0)
+    ds = Dataset(rng.uniform(0, 1, (6, 20, 24, 3)).astype(np.float32), cams, "bounded",
+                 np.ones(3, np.float32), "", "train")
+    return teacher, ds
+
+
+def _features(run):
+    state = torch.load(run / "checkpoint.pt", weights_only=True)
+    return int(state["step"]), {k: v for k, v in state["model"].items()}
+
+
+def test_train_resume_and_bake(tmp_path, small_run_inputs, monkeypatch):
+    from clrender.ndrf import train as ndrf_train
+    from clrender.ndrf.baked import load_baked
+
+    teacher, ds = small_run_inputs
+    tcfg = replace(ndrf_train.TRAIN_PRESETS["tiny"], iterations=20, n_distill=4,
+                   checkpoint_every=10, log_every=1, patch=8)
+    run_a = ndrf_train.train(ds, tmp_path / "a", teacher, preset="tiny", progress=False,
+                             train_config=tcfg)
+    step, state_a = _features(run_a)
+    assert step == 20 and set(state_a) == {"features.0", "features.1", "conv0.weight",
+                                           "conv0.bias", "conv1.weight", "conv1.bias"}
+    # An interrupted run resumes from its checkpoint and ends where the whole run ended.
+    save = ndrf_train.save_checkpoint
+
+    def save_then_stop(path, shader, opt, step):
+        save(path, shader, opt, step)
+        if step == 10:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(ndrf_train, "save_checkpoint", save_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        ndrf_train.train(ds, tmp_path / "b", teacher, preset="tiny", progress=False,
+                         train_config=tcfg)
+    monkeypatch.setattr(ndrf_train, "save_checkpoint", save)
+    assert _features(tmp_path / "b")[0] == 10
+    run_b = ndrf_train.train(ds, tmp_path / "b", teacher, preset="tiny", progress=False,
+                             train_config=tcfg)
+    step, state_b = _features(run_b)
+    assert step == 20
+    for name in state_a:
+        assert torch.equal(state_a[name], state_b[name]), name
+    steps = [json.loads(line)["step"] for line in (run_b / "log.jsonl").read_text().splitlines()]
+    assert steps == list(range(20))
+    # A finished run is not trained again; a changed config starts afresh.
+    ndrf_train.train(ds, run_a, teacher, preset="tiny", progress=False, train_config=tcfg)
+    assert len((run_a / "log.jsonl").read_text().splitlines()) == 20
+    ndrf_train.train(ds, run_a, teacher, preset="tiny", progress=False,
+                     train_config=replace(tcfg, iterations=5))
+    assert _features(run_a)[0] == 5
+    # Baking: the checkpoint's values, the conv weights as [dy, dx, in, out].
+    model = load_baked(ndrf_train.bake_run(run_b, tmp_path / "b.npz"))
+    assert np.array_equal(model.arrays["features_1"], state_b["features.1"].numpy())
+    assert np.array_equal(model.arrays["conv0_w"],
+                          state_b["conv0.weight"].permute(2, 3, 1, 0).numpy())
+    assert model.background == (1.0, 1.0, 1.0)
 
 
 @pytest.mark.slow

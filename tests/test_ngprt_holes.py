@@ -20,7 +20,8 @@ import pytest
 from clrender.camera import Camera, generate_rays, look_at
 from clrender.ngprt.baked import (BakedFormatError, BakedModel, build_distance_grid, build_mip,
                                   expected_arrays, sparse_coarse_grid, validate)
-from clrender.ngprt.config import FEATURES, ModelConfig
+from clrender.ngprt.config import FEATURES, MAX_LATTICE_POINTS, ModelConfig, preset
+from clrender.ngprt.random_model import random_baked_model
 from clrender.ngprt.render_ref import march_reference, ray_range
 from clrender.ngprt.space import cell_index, to_grid
 
@@ -179,3 +180,42 @@ def test_kernel_takes_every_occupied_point_like_the_reference(patch_model):
         np.testing.assert_array_equal(out["n_occ"], occupied_lattice_points(patch_model, o, d))
         total += int(ref["n_occ"].sum())
     assert total > 20_000
+
+
+# ---- validation ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("field,value", [
+    ("L_C", 0), ("L_C", 32.0), ("L_C", -16), ("L_C", 2048), ("L", 0), ("L", 30), pytest.param("L", 10**30, id="L-10**30"),
+    ("L", True), ("log2_T", 12.5), ("log2_T", 25), ("coarse_block", 0), ("G_res", 0),
+    ("aux_levels", 0), ("aux_hidden", 2**40), ("aux_min_res", 64), ("near", math.nan),
+    ("near", -1.0), ("far", math.inf), ("far", math.nan), ("far", 1e7), ("far", "1000"),
+    ("variant", None), ("scene", "Bounded")])
+def test_config_refuses_with_field_and_value(field, value):
+    with pytest.raises(ValueError, match="invalid ModelConfig") as err:
+        preset("tiny", **{field: value})
+    assert field in str(err.value) and str(value) in str(err.value), str(err.value)
+
+
+@pytest.fixture(scope="module")
+def tiny_model():
+    return random_baked_model(preset("tiny", L_C=16, G_res=8, log2_T=8), seed=1)
+
+
+@pytest.mark.parametrize("gamma,fragment", [
+    (1e-9, "gamma=1e-09 is too small"), (1e-300, "too small"), (5e-324, "too small"),
+    (0.0, "gamma must be finite and > 0"), (-2.0, "> 0"), (math.nan, "> 0"), (math.inf, "> 0"),
+    (1e300, "gamma=1e+300 is too large"), pytest.param(10**400, "401 digits", id="10**400"), ("1.0", "not a number"),
+    (True, "not a number"), (None, "not a number")])
+def test_validate_refuses_gamma(tiny_model, gamma, fragment):
+    with pytest.raises(BakedFormatError, match="^m.npz: ") as err:
+        validate(BakedModel(tiny_model.config, gamma, tiny_model.arrays), "m.npz")
+    assert fragment in str(err.value), str(err.value)
+
+
+@pytest.mark.parametrize("scene", ["bounded", "unbounded"])
+def test_lattice_bound_is_the_documented_maximum(tiny_model, scene):
+    cfg = preset("tiny", L_C=16, G_res=8, log2_T=8, scene=scene)
+    validate(BakedModel(cfg, cfg.min_gamma * 1.001, tiny_model.arrays))
+    with pytest.raises(BakedFormatError, match=f"more than {MAX_LATTICE_POINTS}"):
+        validate(BakedModel(cfg, cfg.min_gamma * 0.999, tiny_model.arrays))
+    assert MAX_LATTICE_POINTS * 4 < 2**31        # k, k + 1 and the skip's k + 2 fit int32

@@ -4,7 +4,9 @@ Three pixel-parallel passes (``kernels/ndrf_shade.cl``, one per conv layer as in
 paper's WebGL shader) implement docs/ndrf.md; :mod:`clrender.ndrf.shader_ref` is the numpy
 reference they are tested against. A :class:`Shader` uploads the meshes, features and
 weights once, builds its program once per (device, ``-D`` defines) and keeps its screen
-buffers from call to call while the image size stays the same.
+buffers from call to call while the image size stays the same. The passes compute only
+what a covered pixel's colour depends on (the kernel file's header says how); pixels no
+mesh covers get the background, as the contract says they must.
 
 Examples:
     >>> hits = HitCaster(model).cast_camera(camera)
@@ -95,7 +97,7 @@ def packed_weights(model, defines: dict) -> dict:
     S, C, H = cfg.kernel_size, cfg.c_in, cfg.hidden
     hs = defines["H_STRIDE"]
     w0 = np.zeros((S * S, C, hs), F32)
-    w0[:, :C, :H] = a["conv0_w"].reshape(S * S, C, H)
+    w0[..., :H] = a["conv0_w"].reshape(S * S, C, H)
     b0 = np.zeros(hs, F32)
     b0[:H] = a["conv0_b"]
     w1 = np.zeros((S * S, 3, hs), F32)
@@ -104,8 +106,9 @@ def packed_weights(model, defines: dict) -> dict:
 
 
 def local_size(kernel: cl.Kernel, device: cl.Device) -> tuple[int, int]:
-    """A 2D work-group tile from the device's limits: the kernel's preferred multiple
-    across x, rows down to 8 multiples in all (within the device and kernel maxima)."""
+    """A 2D work-group tile from the device's limits: the kernel's preferred work-group
+    size multiple across x, and rows up to 8 such multiples per group, within the device's
+    and the kernel's maximum work-group sizes."""
     info = cl.kernel_work_group_info
     most = min(device.max_work_group_size,
                kernel.get_work_group_info(info.WORK_GROUP_SIZE, device))
@@ -144,8 +147,8 @@ class Shader:
 
     def _frame_buffers(self, width: int, height: int) -> dict:
         """Per-size buffers, re-allocated only when the image size changes. The screen and
-        hidden buffers hold the convs' zero padding (layout in kernels/ndrf_shade.cl),
-        filled once here and never written by the kernels."""
+        hidden buffers hold the convs' zero padding (layout in kernels/ndrf_shade.cl):
+        zeroed once here, never written by the three passes."""
         if self._size != (width, height):
             ctx, q, mf = self.runtime.context, self.runtime.queue, cl.mem_flags
             d, n, K = self.defines, width * height, self.config.K
@@ -153,6 +156,9 @@ class Shader:
             self.screen_cols = width + d["PIX"] - 1 + r
             screen_floats = (height + r) * self.screen_cols * d["C_IN"]
             hidden_floats = (height + r) * (width + r) * d["H_STRIDE"]
+            if max(screen_floats, hidden_floats, K * n * 2) >= 2 ** 31:
+                raise ValueError(f"{width}x{height} pixels: the shader's buffers would need "
+                                 f"more than 2^31 floats (int32 kernel indices)")
             self._bufs = {
                 "cam": cl.Buffer(ctx, mf.READ_ONLY, 16 * 4),
                 "tri": cl.Buffer(ctx, mf.READ_ONLY, K * n * 4),

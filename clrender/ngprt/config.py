@@ -67,6 +67,11 @@ class ModelConfig:
         near, far: ray range in world units (far only bounds unbounded scenes).
         aux_levels, aux_min_res, aux_log2_T, aux_features, aux_hidden: the auxiliary
             NGP that yields coarse features and attention logits during training.
+
+    Raises ``ValueError`` naming each bad field and its value: int fields must be
+    integers in [1, 2^31 - 1], near/far finite with ``0 <= near < far <= MAX_FAR``, and
+    the sizes must fit the grids and the kernels' int32 arithmetic (docs/ngprt.md
+    "Baked file").
     """
 
     L: int = 2
@@ -153,8 +158,9 @@ _INT_FIELDS = ("L", "L_C", "log2_T", "G_res", "coarse_block", "aux_levels", "aux
 
 
 def _type_problems(c: ModelConfig) -> list[str]:
-    """Fields of the wrong kind: ints that are not integers >= 1, non-finite distances,
-    unknown variant or scene (checked first: the sizes below do arithmetic on them)."""
+    """Fields of the wrong kind: ints that are not integers in [1, INT32_MAX], distances
+    that are not finite numbers up to MAX_FAR, an unknown variant or scene (checked
+    first: the sizes below do arithmetic on them)."""
     problems = []
     if c.variant not in VARIANTS:
         problems.append(f"variant {c.variant!r} is not one of {VARIANTS}")
