@@ -3,17 +3,17 @@ data race, no use of uninitialised values, no OpenCL API misuse.
 
 NGP-RT: generates camera rays (kernels/camera.cl) and renders a tiny random model (L_C=16,
 8x8 pixels) with every aggregation variant, both scene types and G on and off. NDRF: shades
-a tiny random model (K=2, 10x8 pixels, the mesh crossing the image border) with both kernel
-sizes, two frames each (kernels/ndrf_shade.cl). Each runs in a subprocess run by
-``oclgrind --check-api --data-races --uninitialized``. One report is expected and
-ignored: pyopencl, when it builds or fetches a kernel, asks ``clGetDeviceInfo`` for a
-property Oclgrind 21.10 does not implement (CL_INVALID_VALUE for 'param_name'); it
-involves no kernel and no call of ours. Every Renderer and Shader is kept alive until
-the end, each at one image size (a Shader frees its frame buffers when the size changes):
-Oclgrind 21.10's --uninitialized plugin reports reads of freshly written buffers as
-uninitialised once the memory of released buffers is reused by new ones (seen with a
-second Renderer after the first was freed; none while all stay alive, and none with a
-single Renderer rendering repeatedly).
+a tiny random model (K=2, 10x8 pixels, hits on the image border and misses) with both
+kernel sizes and both conv0 organisations, two frames each (kernels/ndrf_shade.cl). Each
+runs in a subprocess run by ``oclgrind --check-api --data-races --uninitialized``. One
+report is expected and ignored: pyopencl, when it builds or fetches a kernel, asks
+``clGetDeviceInfo`` for a property Oclgrind 21.10 does not implement (CL_INVALID_VALUE for
+'param_name'); it involves no kernel and no call of ours. Every Renderer and Shader is
+kept alive until the end, each at one image size (a Shader frees its frame buffers when the
+size changes): Oclgrind 21.10's --uninitialized plugin reports reads of freshly written
+buffers as uninitialised once the memory of released buffers is reused by new ones (seen
+with a second Renderer after the first was freed; none while all stay alive, and none with
+a single Renderer rendering repeatedly).
 """
 from __future__ import annotations
 
@@ -72,21 +72,28 @@ def test_kernels_clean_under_oclgrind():
 
 NDRF_SCRIPT = """
 from clrender.camera import Camera, look_at
+from clrender.ndrf import shader_cl
 from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.hits import HitCaster
 from clrender.ndrf.random_model import random_ndrf_model
-from clrender.ndrf.shader_cl import Shader
 
-camera = Camera.from_fov(0.8, 10, 8, look_at([2.2, -1.6, 0.9], [0.5, -0.3, 0.2]))
+# Hits reach the right and bottom borders (the bottom-right corner too), misses remain.
+camera = Camera.from_fov(0.8, 10, 8, look_at([1.6, -1.2, 0.7], [-0.4, 0.4, 0.45]))
 keep = []  # see the module doc: no buffer is released while Oclgrind watches
-for kernel_size in (2, 1):
-    model = random_ndrf_model(NDRFConfig(thresholds=(1e-4, 1e-2), kernel_size=kernel_size), 0)
-    hits = HitCaster(model).cast_camera(camera)
-    keep.append(Shader(model))
-    for frame in range(2):
-        rgb, ms = keep[-1].shade(camera, hits.tri, hits.bary)
-    print("RENDERED", kernel_size, round(float(hits.coverage.mean()), 3),
-          bool(hits.coverage[:, -1].any() or hits.coverage[-1].any()), flush=True)
+# Both conv0 organisations: one pixel per work-item (GPUs) and 8 per work-item (AVX-512
+# CPUs, reading the screen buffer's padding columns).
+for layout in ({"H_VEC": 8, "ACCUMULATORS": 0}, {"H_VEC": 16, "ACCUMULATORS": 16}):
+    shader_cl.device_layout = lambda device, layout=layout: dict(layout)
+    for kernel_size in (2, 1):
+        config = NDRFConfig(thresholds=(1e-4, 1e-2), kernel_size=kernel_size)
+        model = random_ndrf_model(config, 0)
+        hits = HitCaster(model).cast_camera(camera)
+        keep.append(shader_cl.Shader(model))
+        for frame in range(2):
+            rgb, ms = keep[-1].shade(camera, hits.tri, hits.bary)
+        print("RENDERED", keep[-1].defines["PIX"], kernel_size,
+              round(float(hits.coverage.mean()), 3),
+              bool(hits.coverage[-1, -1]), flush=True)
 """
 
 
@@ -113,5 +120,6 @@ def test_ndrf_kernels_clean_under_oclgrind():
     assert proc.returncode == 0, f"oclgrind run failed ({proc.returncode}):\n{log[-4000:]}"
     assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])
     rendered = [line.split() for line in log.splitlines() if line.startswith("RENDERED")]
-    assert len(rendered) == 2, log[-4000:]
-    assert all(0.0 < float(r[2]) < 1.0 and r[3] == "True" for r in rendered), rendered
+    assert len(rendered) == 4, log[-4000:]
+    assert {r[1] for r in rendered} == {"1", "8"}, rendered
+    assert all(0.0 < float(r[3]) < 1.0 and r[4] == "True" for r in rendered), rendered
