@@ -9,7 +9,7 @@ import pytest
 
 from clrender import bakedfile, methods
 from clrender.bakedfile import BakedFormatError
-from clrender.ndrf.baked import FORMAT, VERSION, NDRFModel, load_baked, save_baked, validate
+from clrender.ndrf.baked import FORMAT, NDRFModel, load_baked, save_baked, validate
 from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.random_model import random_ndrf_model
 

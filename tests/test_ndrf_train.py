@@ -26,8 +26,8 @@ from clrender.ndrf.distill import (azimuth_arc, cached_distillation, distillatio
 from clrender.ndrf.hits import HitCaster
 from clrender.ndrf.random_model import random_ndrf_model
 from clrender.ndrf.shader_ref import shade_reference
-from clrender.ndrf.train import (MODEL_OPTIONS, NDRFShader, TrainConfig, configs, crop,
-                                 learning_rate, model_spec, shade_image)
+from clrender.ndrf.shader_torch import NDRFShader, crop, shade_image
+from clrender.ndrf.train import MODEL_OPTIONS, TrainConfig, configs, learning_rate, model_spec
 
 TOL = 1e-5
 THRESHOLDS = {1: (1e-2,), 2: (1e-4, 1e-2), 3: (1e-4, 1e-3, 1e-2)}

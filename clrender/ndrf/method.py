@@ -8,7 +8,6 @@ called.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 from .baked import FORMAT, load_baked
 from .config import PRESETS as _PRESETS

@@ -1,0 +1,196 @@
+"""The NDRF shader in PyTorch: the differentiable twin of
+:func:`clrender.ndrf.shader_ref.shade_reference` (docs/ndrf.md), used for training.
+
+Per-vertex features are parameters gathered by barycentric weights; hit positions and the
+view encoding are constants of a view; the two conv layers follow docs/ndrf.md's alternated
+padding (also on patches, computed with a 1-pixel halo and cropped).
+
+Examples:
+    >>> shader = NDRFShader.from_model(model)            # from an NDRFModel
+    >>> rgb = shade_image(shader, tri, bary, dirs, background)   # (H, W, 3)
+    >>> arrays = shader.to_arrays(background)            # back to baked arrays
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from .baked import NDRFModel
+from .config import NDRFConfig
+from .hits import HitCaster
+
+F32 = np.float32
+
+
+def view_encoding(dirs: torch.Tensor, n_freq: int) -> torch.Tensor:
+    """(..., 3) unit directions -> (..., 3 + 6 n_freq): d, then sin(2^i d), cos(2^i d)."""
+    parts = [dirs]
+    for i in range(n_freq):
+        a = float(2.0 ** i) * dirs
+        parts += [torch.sin(a), torch.cos(a)]
+    return torch.cat(parts, -1)
+
+
+def crop(tri, bary, y0: int, x0: int, ph: int, pw: int, halo: int):
+    """The hits of pixels [y0 - halo, y0 + ph + halo) x [x0 - halo, x0 + pw + halo).
+
+    Args:
+        tri: (K, H, W) int tensor, -1 = miss; bary: (K, H, W, 2) float32.
+    Returns:
+        tri (K, R, C) int64 (-1 also outside the image), bary (K, R, C, 2), inside (R, C)
+        bool (the pixel lies in the image), rows (R,) and cols (C,) clamped to the image,
+        with R = ph + 2 halo, C = pw + 2 halo.
+    """
+    H, W = tri.shape[1:]
+    rows = torch.arange(y0 - halo, y0 + ph + halo, device=tri.device)
+    cols = torch.arange(x0 - halo, x0 + pw + halo, device=tri.device)
+    inside = ((rows >= 0) & (rows < H))[:, None] & ((cols >= 0) & (cols < W))[None, :]
+    rows, cols = rows.clamp(0, H - 1), cols.clamp(0, W - 1)
+    t = tri[:, rows][:, :, cols].long()
+    return torch.where(inside, t, -1), bary[:, rows][:, :, cols], inside, rows, cols
+
+
+def camera_dirs(cam: torch.Tensor, rows: torch.Tensor, cols: torch.Tensor) -> torch.Tensor:
+    """(R, C, 3) float32 unit ray directions of pixels rows x cols of a packed camera
+    (``Camera.packed()``, (16,) float32), in the operation order of ``generate_rays``."""
+    fx, fy, cx, cy = cam[0], cam[1], cam[2], cam[3]
+    R = cam[4:13].reshape(3, 3)
+    a = ((cols.float() + 0.5 - cx) / fx)[None, :].expand(len(rows), len(cols))
+    b = (-((rows.float() + 0.5 - cy) / fy))[:, None].expand(len(rows), len(cols))
+    d = [R[i, 0] * a + R[i, 1] * b - R[i, 2] for i in range(3)]
+    norm = torch.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    return torch.stack([di / norm for di in d], -1)
+
+
+class NDRFShader(torch.nn.Module):
+    """Per-vertex features of K fixed meshes and the conv shader, differentiable.
+
+    Parameters (the checkpoint's state dict): ``features.k`` (V_k, 8) and ``conv0``,
+    ``conv1`` (torch layout (out, in, S, S)). Vertices and faces are fixed buffers.
+    """
+
+    def __init__(self, config: NDRFConfig, meshes, features, convs):
+        super().__init__()
+        self.config = config
+        self.features = torch.nn.ParameterList(
+            [torch.nn.Parameter(torch.as_tensor(np.asarray(f, F32))) for f in features])
+        for k, (v, f) in enumerate(meshes):
+            self.register_buffer(f"vertices_{k}", torch.as_tensor(np.asarray(v, F32)),
+                                 persistent=False)
+            self.register_buffer(f"faces_{k}", torch.as_tensor(np.asarray(f, np.int64)),
+                                 persistent=False)
+        S, H = config.kernel_size, config.hidden
+        self.conv0 = torch.nn.Conv2d(config.c_in, H, S)
+        self.conv1 = torch.nn.Conv2d(H, 3, S)
+        with torch.no_grad():
+            for conv, (w, b) in zip((self.conv0, self.conv1), convs):
+                conv.weight.copy_(torch.as_tensor(np.transpose(w, (3, 2, 0, 1))))
+                conv.bias.copy_(torch.as_tensor(b))
+
+    @classmethod
+    def from_model(cls, model: NDRFModel) -> "NDRFShader":
+        """The shader of a (baked or initial) :class:`NDRFModel`."""
+        K, a = model.config.K, model.arrays
+        return cls(model.config, [model.mesh(k)[:2] for k in range(K)],
+                   [model.mesh(k)[2] for k in range(K)],
+                   [(a["conv0_w"], a["conv0_b"]), (a["conv1_w"], a["conv1_b"])])
+
+    def to_arrays(self, background) -> dict:
+        """The baked arrays (docs/ndrf.md): conv weights as [dy, dx, in, out]."""
+        out = {}
+        for k in range(self.config.K):
+            out[f"vertices_{k}"] = getattr(self, f"vertices_{k}").cpu().numpy().astype(F32)
+            out[f"faces_{k}"] = getattr(self, f"faces_{k}").cpu().numpy().astype(np.int32)
+            out[f"features_{k}"] = self.features[k].detach().cpu().numpy().astype(F32)
+        for i, conv in enumerate((self.conv0, self.conv1)):
+            w = conv.weight.detach().cpu().numpy()
+            out[f"conv{i}_w"] = np.ascontiguousarray(np.transpose(w, (2, 3, 1, 0)), F32)
+            out[f"conv{i}_b"] = conv.bias.detach().cpu().numpy().astype(F32)
+        out["background"] = np.asarray(background, F32).reshape(3)
+        return out
+
+    def screen_buffer(self, tri, bary, dirs, inside) -> torch.Tensor:
+        """(R, C, C_in): features, hit positions, view encoding (zeros outside ``inside``)."""
+        hit = tri >= 0
+        safe = tri.clamp(min=0)
+        feats, pos = [], []
+        for k in range(self.config.K):
+            idx = getattr(self, f"faces_{k}")[safe[k]]                      # (R, C, 3)
+            u, v = bary[k, ..., 0:1], bary[k, ..., 1:2]
+            w = 1.0 - u - v
+            for values, parts in ((self.features[k], feats),
+                                  (getattr(self, f"vertices_{k}"), pos)):
+                g = w * values[idx[..., 0]] + u * values[idx[..., 1]] + v * values[idx[..., 2]]
+                parts.append(torch.where(hit[k][..., None], g, 0.0))
+        view = view_encoding(dirs, self.config.n_freq) * inside[..., None]
+        return torch.cat(feats + pos + [view], -1)
+
+    def forward(self, tri, bary, dirs, inside, background) -> torch.Tensor:
+        """Shade a window of pixels with a halo of S - 1 pixels on every side.
+
+        Args:
+            tri (K, R, C) int64, -1 = miss; bary (K, R, C, 2); dirs (R, C, 3) unit ray
+            directions; inside (R, C) bool (halo pixels outside the image: False), as
+            :func:`crop` gives them; background (3,) RGB.
+        Returns:
+            (R - 2 (S - 1), C - 2 (S - 1), 3) composited RGB of the window's interior:
+            layer 0 is a valid conv over the window (its bottom/right padding), its outputs
+            outside the image are zeroed, then layer 1 (top/left padding), sigmoid.
+        """
+        halo = self.config.kernel_size - 1
+        x = self.screen_buffer(tri, bary, dirs, inside).permute(2, 0, 1)[None]
+        h = torch.relu(self.conv0(x))
+        h = h * inside[:h.shape[2], :h.shape[3]]
+        s = torch.sigmoid(self.conv1(h))[0].permute(1, 2, 0)
+        R, C = tri.shape[1:]
+        cov = (tri[:, halo:R - halo, halo:C - halo] >= 0).any(0)[..., None].to(s.dtype)
+        return cov * s + (1.0 - cov) * background
+
+
+def shade_image(shader: NDRFShader, tri, bary, dirs, background) -> torch.Tensor:
+    """A full frame, as :func:`clrender.ndrf.shader_ref.shade_reference` (torch tensors:
+    tri (K, H, W), bary (K, H, W, 2), dirs (H, W, 3); returns (H, W, 3))."""
+    H, W = tri.shape[1:]
+    halo = shader.config.kernel_size - 1
+    t, b, inside, rows, cols = crop(tri, bary, 0, 0, H, W, halo)
+    return shader(t, b, dirs[rows][:, cols], inside, torch.as_tensor(background))
+
+
+@dataclass
+class ViewSet:
+    """Views with their hits cast once: tri (N, K, H, W) int32, bary (N, K, H, W, 2)
+    float32, images (N, H, W, 3) targets, cams (N, 16) packed cameras, on one device."""
+
+    tri: torch.Tensor
+    bary: torch.Tensor
+    images: torch.Tensor
+    cams: torch.Tensor
+
+    @classmethod
+    def build(cls, meshes, cameras, images, device) -> "ViewSet":
+        caster = HitCaster(meshes)
+        hits = [caster.cast_camera(c) for c in cameras]
+        as_t = lambda a: torch.as_tensor(np.ascontiguousarray(a), device=device)  # noqa: E731
+        return cls(as_t(np.stack([h.tri for h in hits])), as_t(np.stack([h.bary for h in hits])),
+                   as_t(images), as_t(np.stack([c.packed() for c in cameras])))
+
+    def __len__(self) -> int:
+        return len(self.tri)
+
+    @property
+    def height(self) -> int:
+        return self.tri.shape[2]
+
+    @property
+    def width(self) -> int:
+        return self.tri.shape[3]
+
+    def window(self, i: int, y0: int, x0: int, ph: int, pw: int, halo: int):
+        """:func:`crop` of view i with its ray directions: (tri, bary, dirs, inside)."""
+        t, b, inside, rows, cols = crop(self.tri[i], self.bary[i], y0, x0, ph, pw, halo)
+        return t, b, camera_dirs(self.cams[i], rows, cols), inside
+
+
+# -- training -------------------------------------------------------------------------------
