@@ -14,7 +14,9 @@ passed over. When nothing matches, the error lists
 the devices that exist.
 
 Programs are built from ``kernels/*.cl`` with ``-D`` specialisation and cached per
-(source text, options, device); kernels are fetched from a built program once.
+(source text, options, device); kernels are fetched from a built program once. Each
+program has two builds: the exact one (:data:`EXACT_OPTIONS`, what the tests compare with
+the numpy references) and the fast one (:data:`FAST_OPTIONS`, for rendering).
 """
 from __future__ import annotations
 
@@ -27,8 +29,14 @@ import numpy as np
 import pyopencl as cl
 
 # Identical float results to the numpy references: no fused multiply-add, correctly
-# rounded division and sqrt (the references use IEEE float32 throughout).
-BASE_OPTIONS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
+# rounded division and sqrt (the references use IEEE float32 throughout); -D FAST_MATH=0.
+EXACT_OPTIONS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
+# For rendering: the driver may contract a * b + c into a fused multiply-add and divide
+# and take sqrt within the OpenCL ulp bounds; -D FAST_MATH=1 lets a kernel use native_*
+# functions. Kernels that place positions or cells keep FP_CONTRACT OFF, so geometry is
+# the same in both builds. Not -cl-fast-relaxed-math: it implies finite-math-only, and
+# the kernels rely on inf and NaN (rays parallel to an axis).
+FAST_OPTIONS = ("-cl-mad-enable", "-cl-no-signed-zeros")
 
 
 class DeviceError(RuntimeError):
@@ -47,10 +55,20 @@ class Runtime:
     def name(self) -> str:
         return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
 
-    def program(self, source_name: str, defines: dict | None = None) -> "Program":
-        """The program ``kernels/<source_name>`` built with ``-D`` defines (cached)."""
-        opts = tuple(f"-D{k}={_define_value(v)}" for k, v in sorted((defines or {}).items()))
-        return _build(self, source_name, opts)
+    def program(self, source_name: str, defines: dict | None = None,
+                exact: bool = True) -> "Program":
+        """The program ``kernels/<source_name>`` built with ``-D`` defines (cached).
+
+        Args:
+            source_name: a file of ``kernels/``.
+            defines: ``{name: value}`` passed as ``-D`` (bools as 0/1, floats as float32).
+            exact: the exact build (:data:`EXACT_OPTIONS`, ``-D FAST_MATH=0``), compared
+                with the numpy references in tests; False: the fast build
+                (:data:`FAST_OPTIONS`, ``-D FAST_MATH=1``) for rendering.
+        """
+        defines = {**(defines or {}), "FAST_MATH": not exact}
+        opts = tuple(f"-D{k}={_define_value(v)}" for k, v in sorted(defines.items()))
+        return _build(self, source_name, (EXACT_OPTIONS if exact else FAST_OPTIONS) + opts)
 
 
 class Program:
@@ -180,12 +198,41 @@ def _kernel_dir() -> str:
 @functools.lru_cache(maxsize=None)
 def _build(runtime: Runtime, source_name: str, options: tuple[str, ...]) -> Program:
     source = kernel_source(source_name)
-    opts = list(BASE_OPTIONS) + list(options) + [f"-I{_kernel_dir()}"]
+    opts = list(options) + [f"-I{_kernel_dir()}"]
     try:
         program = cl.Program(runtime.context, source).build(options=opts)
     except cl.RuntimeError as exc:
         raise RuntimeError(f"kernels/{source_name}: build failed with {' '.join(options)}:\n{exc}") from exc
     return Program(program)
+
+
+def work_group_size(kernel: cl.Kernel, device: cl.Device, global_size: tuple[int, ...],
+                    target: int = 64) -> tuple[int, ...]:
+    """A local size for ``kernel`` derived from the device: the first axis a multiple of
+    the kernel's preferred work-group size multiple (the SIMD or warp width), the group
+    about ``target`` work-items (at least one multiple) and no larger than the kernel's
+    maximum work-group size or the global size (padded up to it by :func:`padded`).
+
+    Args:
+        global_size: work-items per axis (1 or 2 axes), before padding.
+    Returns:
+        local size, one entry per axis.
+    """
+    info = cl.kernel_work_group_info
+    limit = max(1, kernel.get_work_group_info(info.WORK_GROUP_SIZE, device))
+    multiple = max(1, kernel.get_work_group_info(info.PREFERRED_WORK_GROUP_SIZE_MULTIPLE, device))
+    multiple = min(multiple, limit)
+    lx = min(multiple * max(1, min(target, limit) // multiple),
+             multiple * -(-global_size[0] // multiple))
+    if len(global_size) == 1:
+        return (lx,)
+    ly = max(1, min(limit // lx, target // lx, global_size[1]))
+    return (lx, ly)
+
+
+def padded(global_size: tuple[int, ...], local_size: tuple[int, ...]) -> tuple[int, ...]:
+    """``global_size`` rounded up to a multiple of ``local_size`` per axis."""
+    return tuple(-(-g // l) * l for g, l in zip(global_size, local_size))
 
 
 def event_ms(event: cl.Event) -> float:

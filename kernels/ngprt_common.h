@@ -1,9 +1,12 @@
 /* NGP-RT device helpers of ngprt_march.cl.
  *
  * Mirrors clrender/ngprt/space.py, encoding.py and render_ref.py operation for
- * operation (docs/ngprt.md is the contract): FP contraction is off and the build asks
- * for correctly rounded division and sqrt, so positions, cells and lattice indices are
- * bit-identical to the numpy reference; exp-based values may differ by a few ulps.
+ * operation (docs/ngprt.md is the contract). The exact build (device.EXACT_OPTIONS) keeps
+ * FP contraction off and asks for correctly rounded division and sqrt, so positions,
+ * cells and lattice indices are bit-identical to the numpy reference; exp-based values
+ * may differ by a few ulps. The fast build (-D FAST_MATH=1, device.FAST_OPTIONS) takes
+ * exp and the sigmoid's reciprocal from native_exp / native_recip; positions, cells and
+ * lattice indices are computed by the same operations in both builds.
  *
  * Every constant comes as a -D define from clrender/ngprt/render_cl.py:kernel_defines,
  * so Python and OpenCL share one definition (clrender/ngprt/config.py):
@@ -11,7 +14,9 @@
  *     and the variant codes VARIANT_SUM .. VARIANT_SEPARATE_V (config.VARIANT_CODES);
  *     SH_DIM and DEFERRED_HIDDEN come too, for the deferred MLP;
  *   per model: L, L_C, LOG2_T, COARSE_BLOCK, G_RES, N_ATT (attention channels in the
- *     coarse grid), N_INV (spatially invariant logits), VARIANT, UNBOUNDED, USE_G.
+ *     coarse grid), N_INV (spatially invariant logits), VARIANT, UNBOUNDED, USE_G;
+ *   per device: RAYS (rays per work-item in vector lanes), FAST_MATH; the march also
+ *     takes G_IN_CODE (render_cl.g_in_codes).
  * A missing define fails the build: an undefined name is 0 in #if, which would
  * silently pick VARIANT_SUM's code or a zero T_STOP.
  */
@@ -31,13 +36,23 @@
     !defined(UNBOUNDED) || !defined(USE_G)
 #error "ngprt kernels need -D L L_C LOG2_T COARSE_BLOCK G_RES N_ATT N_INV VARIANT UNBOUNDED USE_G"
 #endif
-/* The code's shape fixes these: features travel as float8, the mip offsets below
- * spell out 5 levels, the mlp fusion runs its hidden layer in float8 lanes. */
+/* The code's shape fixes this: features travel as float8 (the mlp fusion also runs
+ * its hidden layer in float8 lanes). */
 #if FEATURES != 8
 #error "FEATURES must be 8: features are held in float8"
 #endif
-#if N_MIP != 5
-#error "N_MIP must be 5: OCC_OFFSET spells out five levels"
+#if !defined(FAST_MATH)
+#error "ngprt kernels need -D FAST_MATH=0 or 1 (render_cl.kernel_defines)"
+#endif
+
+/* exp and 1/x: the library's (a few ulps, as numpy's) in the exact build, the device's
+ * native ones in the fast build. */
+#if FAST_MATH
+#define NGP_EXP(x) native_exp(x)
+#define NGP_RECIP(x) native_recip(x)
+#else
+#define NGP_EXP(x) exp(x)
+#define NGP_RECIP(x) (1.0f / (x))
 #endif
 #if FUSION_HIDDEN % 8 != 0
 #error "FUSION_HIDDEN must be a multiple of 8"
@@ -47,6 +62,10 @@
 /* A coarse corner holds 8 + N_ATT channels; the renderer pads each corner to a
  * multiple of 8 floats (COARSE_STRIDE) so every read is an aligned float8. */
 #define ATT_VEC ((N_ATT + 7) / 8)                 /* float8 chunks of attention logits */
+#define INV_VEC ((N_INV + 7) / 8)                 /* float8 chunks of invariant logits */
+/* float8 chunks of attention weights (sigmoids) a sample's fusion reads: from the coarse
+ * grid (-v variants) or from the invariant logits (-inv), at least one. */
+#define SIG_LEN (ATT_VEC > INV_VEC ? ATT_VEC : (INV_VEC > 0 ? INV_VEC : 1))
 #define COARSE_STRIDE (FEATURES * (1 + ATT_VEC))  /* floats per coarse corner */
 #define COARSE_BLOCKS_PER_AXIS (L_C / COARSE_BLOCK)
 #define COARSE_CORNERS (COARSE_BLOCK + 1)
@@ -64,25 +83,12 @@ inline float ngp_maxf(float a, float b) { return a > b ? a : b; }
 inline float ngp_minf(float a, float b) { return a < b ? a : b; }
 inline float ngp_absf(float a) { return a < 0.0f ? -a : a; }
 
-/* floor(x) as an int, for |x| < 2^31. */
-inline int ngp_floor_i(float x)
-{
-    const int i = (int)x;
-    return (float)i > x ? i - 1 : i;
-}
-
 /* ceil(x) as an int, for |x| < 2^31. */
 inline int ngp_ceil_i(float x)
 {
     const int i = (int)x;
     return (float)i < x ? i + 1 : i;
 }
-
-/* Occupancy mip level `lev` (resolution L_C >> lev) starts at OCC_OFFSET(lev) in the
- * concatenated uint8 buffer. */
-#define OCC_VOX(lev) ((L_C >> (lev)) * (L_C >> (lev)) * (L_C >> (lev)))
-#define OCC_OFFSET(lev) (((lev) > 0 ? OCC_VOX(0) : 0) + ((lev) > 1 ? OCC_VOX(1) : 0) \
-                         + ((lev) > 2 ? OCC_VOX(2) : 0) + ((lev) > 3 ? OCC_VOX(3) : 0))
 
 /* ---- space.py ------------------------------------------------------------------ */
 
@@ -151,91 +157,15 @@ inline int3 ngp_cell(float3 u, int res)
     return (int3)(ngp_cell1(u.x * r, res), ngp_cell1(u.y * r, res), ngp_cell1(u.z * r, res));
 }
 
-/* Flat C-order index of cell i in a res^3 grid. */
-inline int ngp_flat(int3 i, int res)
-{
-    return (i.x * res + i.y) * res + i.z;
-}
-
-/* Entry and exit distances of the ray with [-1, 1]^3 (space.ray_box); t_in > t_out
- * when the ray misses. fmin/fmax drop the NaN of 0 * inf like numpy's fmin/fmax. */
-inline float2 ngp_ray_box(float3 o, float3 d)
-{
-    const float3 inv = 1.0f / d;
-    const float3 t0 = (-1.0f - o) * inv;
-    const float3 t1 = (1.0f - o) * inv;
-    const float3 lo = fmin(t0, t1), hi = fmax(t0, t1);
-    return (float2)(fmax(fmax(lo.x, lo.y), lo.z), fmin(fmin(hi.x, hi.y), hi.z));
-}
-
 /* ---- encoding.py --------------------------------------------------------------- */
 
-/* Instant-NGP hash of an integer corner into [0, T) (encoding.hash_corner). */
-inline uint ngp_hash(int3 c)
+/* Attention weights of 8 logits at once: one vector exp (Eq. 7-8). */
+inline float8 ngp_sigmoid8(float8 x)
 {
-    return (((uint)c.x * 1u) ^ ((uint)c.y * 2654435761u) ^ ((uint)c.z * 805459861u))
-           & TABLE_MASK;
-}
-
-inline float ngp_sigmoid(float x)
-{
-    return 1.0f / (1.0f + exp(-x));
+    return NGP_RECIP(1.0f + NGP_EXP(-x));
 }
 
 /* ---- features at a sample (docs/ngprt.md, Eq. 6-8) ----------------------------- */
-
-/* Trilinear weights of the 8 corners, corner index (cx << 2) | (cy << 1) | cz. */
-inline void ngp_trilinear_weights(float3 w, float *wc)
-{
-    for (int c = 0; c < 8; ++c) {
-        const float wx = (c & 4) ? w.x : 1.0f - w.x;
-        const float wy = (c & 2) ? w.y : 1.0f - w.y;
-        const float wz = (c & 1) ? w.z : 1.0f - w.z;
-        wc[c] = wx * wy * wz;
-    }
-}
-
-/* Coarse features (8) and attention logits (N_ATT, into att, padded to 8 * ATT_VEC)
- * at u from the sparse coarse grid; zeros when the block is absent (never for an
- * occupied cell). */
-inline float8 ngp_coarse(float3 u, __global const int *block_index,
-                         __global const float8 *blocks, int n_blocks, float8 *att)
-{
-    const int3 i = ngp_cell(u, L_C);
-    const float3 w = u * (float)L_C - (float3)((float)i.x, (float)i.y, (float)i.z);
-    const int3 bi = i / COARSE_BLOCK, r = i - bi * COARSE_BLOCK;
-    const int b = block_index[ngp_flat(bi, COARSE_BLOCKS_PER_AXIS)];
-    float8 f = (float8)(0.0f);
-    for (int a = 0; a < ATT_VEC; ++a) att[a] = (float8)(0.0f);
-    if (b < 0 || b >= n_blocks) return f;
-    float wc[8];
-    ngp_trilinear_weights(w, wc);
-    for (int c = 0; c < 8; ++c) {
-        const int3 j = r + (int3)((c >> 2) & 1, (c >> 1) & 1, c & 1);
-        __global const float8 *corner = blocks + (((b * COARSE_CORNERS + j.x) * COARSE_CORNERS
-                                                   + j.y) * COARSE_CORNERS + j.z) * (1 + ATT_VEC);
-        f = f + wc[c] * corner[0];
-        for (int a = 0; a < ATT_VEC; ++a) att[a] = att[a] + wc[c] * corner[1 + a];
-    }
-    return f;
-}
-
-/* Fine features of hash level l (resolution L_C * 2^(l+1)): 8 aligned float8 gathers. */
-inline float8 ngp_fine(float3 u, int l, __global const float8 *tables)
-{
-    const float3 p = u * (float)(L_C << (l + 1));
-    const int3 i = (int3)(ngp_floor_i(p.x), ngp_floor_i(p.y), ngp_floor_i(p.z));
-    const float3 w = p - (float3)((float)i.x, (float)i.y, (float)i.z);
-    float wc[8];
-    ngp_trilinear_weights(w, wc);
-    __global const float8 *table = tables + (size_t)l * (1u << LOG2_T);
-    float8 f = (float8)(0.0f);
-    for (int c = 0; c < 8; ++c) {
-        const int3 j = i + (int3)((c >> 2) & 1, (c >> 1) & 1, c & 1);
-        f = f + wc[c] * table[ngp_hash(j)];
-    }
-    return f;
-}
 
 /* The `mlp` fusion: relu([f^0 .. f^{L-1}] @ w0 + b0) @ w1 + b1; params packed as
  * [w0 (8L, 64), b0 (64), w1 (64, 8), b1 (8)], every part a multiple of 8 floats, so
@@ -264,35 +194,248 @@ inline float8 ngp_fuse_mlp(const float8 *fl, __global const float *p)
     return out + b1[0];
 }
 
-/* Fusion of the fine features by VARIANT (docs/ngprt.md "Fusion"): logits come from
- * the coarse attention channels (-v) or the invariant parameters (-inv). */
-inline float8 ngp_fuse(const float8 *fl, const float8 *att8, __global const float *params)
+/* Fusion of the fine features by VARIANT (docs/ngprt.md "Fusion"): sig holds the
+ * attention weights sigmoid(logit) in logit order, from the coarse attention channels
+ * (-v) or the invariant parameters (-inv); unused by sum and mlp. */
+inline float8 ngp_fuse(const float8 *fl, const float8 *sig, __global const float *params)
 {
 #if VARIANT == VARIANT_MLP
     return ngp_fuse_mlp(fl, params);
 #else
     float8 out = (float8)(0.0f);
+    const float *a = (const float *)sig;
     for (int l = 0; l < L; ++l) {
 #if VARIANT == VARIANT_SUM
         out = out + fl[l];
-#else
-#if VARIANT == VARIANT_SHARED_V || VARIANT == VARIANT_SEPARATE_V
-        const float *logit = (const float *)att8;
-#else
-        float logit[N_INV];
-        for (int a = 0; a < N_INV; ++a) logit[a] = params[a];
-#endif
-#if VARIANT == VARIANT_SHARED_V || VARIANT == VARIANT_SHARED_INV
-        out = out + ngp_sigmoid(logit[l]) * fl[l];
+#elif VARIANT == VARIANT_SHARED_V || VARIANT == VARIANT_SHARED_INV
+        out = out + a[l] * fl[l];
 #else
         /* Eq. 7-8: omega weighs the density channel, beta the 7 colour channels. */
-        const float omega = ngp_sigmoid(logit[2 * l]), beta = ngp_sigmoid(logit[2 * l + 1]);
-        out = out + select((float8)(beta), (float8)(omega), (int8)(-1, 0, 0, 0, 0, 0, 0, 0))
-                    * fl[l];
-#endif
+        out = out + select((float8)(a[2 * l + 1]), (float8)(a[2 * l]),
+                           (int8)(-1, 0, 0, 0, 0, 0, 0, 0)) * fl[l];
 #endif
     }
     return out;
 #endif
 }
+/* ---- lanes: RAYS rays at once (ngprt_march.cl) ---------------------------------- */
+#if !defined(RAYS)
+#error "ngprt kernels need -D RAYS (rays per work-item: 1, 2, 4, 8 or 16)"
+#endif
+
+/* Vectors of RAYS lanes. Masks are -1 (true) / 0 in every lane, as vector comparisons
+ * give them; VMASK turns a scalar comparison (1 / 0) into the same. */
+/* GATHER(b, i): (vint)(b[i lane 0], b[i lane 1], ...), built in registers (writing lanes
+ * through memory and reading the vector back stalls store forwarding on a CPU). */
+#if RAYS == 1
+typedef float vfloat;
+typedef int vint;
+typedef uint vuint;
+#define VF(x) convert_float(x)
+#define VI(x) convert_int(x)
+#define AS_VU(x) as_uint(x)
+#define AS_VI(x) as_int(x)
+#define VMASK(c) (-(int)(c))
+#define LANE_IDS 0
+#define GATHER(b, i) ((int)(b)[i])
+#define VLOAD(p) (*(p))
+#elif RAYS == 2
+typedef float2 vfloat;
+typedef int2 vint;
+typedef uint2 vuint;
+#define VF(x) convert_float2(x)
+#define VI(x) convert_int2(x)
+#define AS_VU(x) as_uint2(x)
+#define AS_VI(x) as_int2(x)
+#define VLOAD(p) vload2(0, p)
+#define VMASK(c) (c)
+#define LANE_IDS ((int2)(0, 1))
+#define GATHER(b, i) ((int2)((b)[(i).s0], (b)[(i).s1]))
+#elif RAYS == 4
+typedef float4 vfloat;
+typedef int4 vint;
+typedef uint4 vuint;
+#define VF(x) convert_float4(x)
+#define VI(x) convert_int4(x)
+#define AS_VU(x) as_uint4(x)
+#define AS_VI(x) as_int4(x)
+#define VLOAD(p) vload4(0, p)
+#define VMASK(c) (c)
+#define LANE_IDS ((int4)(0, 1, 2, 3))
+#define GATHER(b, i) ((int4)((b)[(i).s0], (b)[(i).s1], (b)[(i).s2], (b)[(i).s3]))
+#elif RAYS == 8
+typedef float8 vfloat;
+typedef int8 vint;
+typedef uint8 vuint;
+#define VF(x) convert_float8(x)
+#define VI(x) convert_int8(x)
+#define AS_VU(x) as_uint8(x)
+#define AS_VI(x) as_int8(x)
+#define VLOAD(p) vload8(0, p)
+#define VMASK(c) (c)
+#define LANE_IDS ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
+#define GATHER(b, i) ((int8)((b)[(i).s0], (b)[(i).s1], (b)[(i).s2], (b)[(i).s3], \
+                             (b)[(i).s4], (b)[(i).s5], (b)[(i).s6], (b)[(i).s7]))
+#elif RAYS == 16
+typedef float16 vfloat;
+typedef int16 vint;
+typedef uint16 vuint;
+#define VF(x) convert_float16(x)
+#define VI(x) convert_int16(x)
+#define AS_VU(x) as_uint16(x)
+#define AS_VI(x) as_int16(x)
+#define VLOAD(p) vload16(0, p)
+#define VMASK(c) (c)
+#define LANE_IDS ((int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
+#define GATHER(b, i) ((int16)((b)[(i).s0], (b)[(i).s1], (b)[(i).s2], (b)[(i).s3], \
+                              (b)[(i).s4], (b)[(i).s5], (b)[(i).s6], (b)[(i).s7], \
+                              (b)[(i).s8], (b)[(i).s9], (b)[(i).sa], (b)[(i).sb], \
+                              (b)[(i).sc], (b)[(i).sd], (b)[(i).se], (b)[(i).sf]))
+#else
+#error "RAYS must be 1, 2, 4, 8 or 16"
+#endif
+#define LANE_F(v, j) (((float *)&(v))[j])
+#define LANE_I(v, j) (((int *)&(v))[j])
+#define FOR_LANES(j) for (int j = 0; j < RAYS; ++j)
+
+/* Three coordinates of RAYS points. */
+typedef struct { vfloat x, y, z; } vpoint;
+typedef struct { vint x, y, z; } vcell;
+
+inline vfloat v_min(vfloat a, vfloat b) { return select(b, a, VMASK(a < b)); }
+inline vfloat v_max(vfloat a, vfloat b) { return select(b, a, VMASK(a > b)); }
+inline vfloat v_abs(vfloat a) { return select(a, -a, VMASK(a < 0.0f)); }
+
+/* floor / ceil as ints, for |x| < 2^31 (ngp_ceil_i per lane). */
+inline vint v_floor_i(vfloat x)
+{
+    const vint i = VI(x);
+    return i + VMASK(VF(i) > x);
+}
+
+inline vint v_ceil_i(vfloat x)
+{
+    const vint i = VI(x);
+    return i - VMASK(VF(i) < x);
+}
+
+/* ---- per lane: space.py and the ray (the functions above, camera.h) ------------- */
+
+/* camera_ray_dir of pixels (px, py), the same operations in the same order. */
+inline vpoint v_ray_dir(__global const float *cam, vint px, int py)
+{
+    const vfloat a = (VF(px) + 0.5f - cam[2]) / cam[0];
+    const float b = -(((float)py + 0.5f - cam[3]) / cam[1]);
+    vpoint d;
+    d.x = cam[4] * a + cam[5] * b - cam[6];
+    d.y = cam[7] * a + cam[8] * b - cam[9];
+    d.z = cam[10] * a + cam[11] * b - cam[12];
+    const vfloat norm = sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+    d.x = d.x / norm;
+    d.y = d.y / norm;
+    d.z = d.z / norm;
+    return d;
+}
+
+inline vfloat v_warp(vfloat t)
+{
+#if UNBOUNDED
+    return select(2.0f - 1.0f / v_max(t, 1.0f), t, VMASK(t <= 1.0f));
+#else
+    return t;
+#endif
+}
+
+inline vfloat v_unwarp(vfloat g)
+{
+#if UNBOUNDED
+    return select(1.0f / (2.0f - v_max(g, 1.0f)), g, VMASK(g <= 1.0f));
+#else
+    return g;
+#endif
+}
+
+#if UNBOUNDED
+/* ngp_contract per lane. */
+inline vpoint v_contract(vpoint x)
+{
+    const vfloat ax = v_abs(x.x), ay = v_abs(x.y), az = v_abs(x.z);
+    const vfloat m = v_max(v_max(ax, ay), az);
+    const vfloat m_safe = v_max(m, 1.0f);
+    const vfloat sx = x.x / m_safe, sy = x.y / m_safe, sz = x.z / m_safe;
+    const vfloat scale = 2.0f - 1.0f / m_safe;
+    const vint inner = VMASK(m <= 1.0f);
+    vpoint c;
+    c.x = select(select(sx, sx * scale, VMASK(ax == m)), x.x, inner);
+    c.y = select(select(sy, sy * scale, VMASK(ay == m)), x.y, inner);
+    c.z = select(select(sz, sz * scale, VMASK(az == m)), x.z, inner);
+    return c;
+}
+#endif
+
+/* u = to_grid(o + t * d) per lane (ngp_point_u). */
+inline vpoint v_point_u(float3 o, vpoint d, vfloat t)
+{
+    vpoint p;
+    p.x = o.x + t * d.x;
+    p.y = o.y + t * d.y;
+    p.z = o.z + t * d.z;
+#if UNBOUNDED
+    p = v_contract(p);
+#endif
+    p.x = (p.x + EXTENT) / (2.0f * EXTENT);
+    p.y = (p.y + EXTENT) / (2.0f * EXTENT);
+    p.z = (p.z + EXTENT) / (2.0f * EXTENT);
+    return p;
+}
+
+/* ngp_cell1 per lane, with a per-lane resolution. */
+inline vint v_cell1(vfloat v, vint res)
+{
+    const vfloat hi = VF(res - 1);
+    return VI(select(select(v, hi, VMASK(v > hi)), 0.0f, VMASK(v < 0.0f)));
+}
+
+inline vcell v_cell(vpoint u, vint res)
+{
+    const vfloat r = VF(res);
+    vcell c;
+    c.x = v_cell1(u.x * r, res);
+    c.y = v_cell1(u.y * r, res);
+    c.z = v_cell1(u.z * r, res);
+    return c;
+}
+
+inline vint v_flat(vcell i, vint res)
+{
+    return (i.x * res + i.y) * res + i.z;
+}
+
+inline vint v_same_cell(vcell a, vcell b)
+{
+    return VMASK(a.x == b.x) & VMASK(a.y == b.y) & VMASK(a.z == b.z);
+}
+
+/* bytes[idx] of the lanes in mask, 0 elsewhere (the other lanes read bytes[0]: their idx
+ * may be out of range). */
+inline vint v_gather_u8(__global const uchar *bytes, vint idx, vint mask)
+{
+    const vint i = select((vint)(0), idx, mask);
+    return select((vint)(0), GATHER(bytes, i), mask);
+}
+
+/* shorts[idx] of the lanes in mask, 0 elsewhere. */
+inline vint v_gather_u16(__global const ushort *shorts, vint idx, vint mask)
+{
+    const vint i = select((vint)(0), idx, mask);
+    return select((vint)(0), GATHER(shorts, i), mask);
+}
+
+/* ints[idx] of the lanes in mask, 0 elsewhere. */
+inline vint v_gather_i32(__global const int *ints, vint idx, vint mask)
+{
+    const vint i = select((vint)(0), idx, mask);
+    return select((vint)(0), GATHER(ints, i), mask);
+}
+
 #endif

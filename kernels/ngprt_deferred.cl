@@ -8,15 +8,43 @@
  * (-D DEFERRED_VEC = 1, 2, 4, 8 or 16), so the 5.8 k multiply-adds per pixel run as
  * SIMD on CPU devices without relying on the driver to vectorise across work-items;
  * the weights are read once per work-item and broadcast. Plain a * b + c: mad()/fma()
- * are several times slower on PoCL (DESIGN.md, performance notes).
+ * are several times slower on PoCL (DESIGN.md, performance notes); the fast build
+ * (-cl-mad-enable) may contract them itself. A work-item whose pixels all have opacity 0
+ * (background) writes the background and skips the MLP: rgb * 0 + bg * 1 is bg exactly.
  *
+ * Sizes from config.kernel_constants: FEATURES (8: 7 composited + opacity), SH_DIM (16),
+ * DEFERRED_HIDDEN (64).
  * params: [w0 (23, 64), b0 (64), w1 (64, 64), b1 (64), w2 (64, 3), b2 (3)] float32.
  */
 #include "camera.h"
 #pragma OPENCL FP_CONTRACT OFF
 
-#define IN 23
-#define HID 64
+#if !defined(FEATURES) || !defined(SH_DIM) || !defined(DEFERRED_HIDDEN) || \
+    !defined(DEFERRED_VEC) || !defined(FAST_MATH)
+#error "ngprt_deferred.cl needs -D FEATURES SH_DIM DEFERRED_HIDDEN DEFERRED_VEC FAST_MATH"
+#endif
+/* The code's shape fixes these: the march writes 7 features + opacity per pixel, ngp_sh4
+ * spells out degree 4, the hidden layers run four outputs per pass. */
+#if FEATURES != 8
+#error "FEATURES must be 8: the march writes 7 composited features and the opacity"
+#endif
+#if SH_DIM != 16
+#error "SH_DIM must be 16: ngp_sh4 spells out degree 4"
+#endif
+#if DEFERRED_HIDDEN % 4 != 0
+#error "DEFERRED_HIDDEN must be a multiple of 4"
+#endif
+
+#define N_FEAT (FEATURES - 1)              /* diffuse rgb (3) + specular (4) */
+#define IN (N_FEAT + SH_DIM)
+#define HID DEFERRED_HIDDEN
+#if FAST_MATH
+#define NGP_EXP(x) native_exp(x)
+#define NGP_RECIP(x) native_recip(x)
+#else
+#define NGP_EXP(x) exp(x)
+#define NGP_RECIP(x) (1.0f / (x))
+#endif
 #define P_W0 0
 #define P_B0 (P_W0 + IN * HID)
 #define P_W1 (P_B0 + HID)
@@ -92,7 +120,7 @@ inline void ngp_dense_relu(const vfloat *in, int n_in, __global const float *w,
     }
 }
 
-/* Gathers the inputs x (23 lanes-vectors) and the opacity of pixels p0 .. p0+VEC-1;
+/* Gathers the inputs x (IN lane-vectors) and the opacity of pixels p0 .. p0+VEC-1;
  * lanes past the image get zeros. */
 inline void ngp_load_inputs(__global const float *cam, int width, int n_pix, int p0,
                             __global const float *feat, vfloat *x, vfloat *opacity)
@@ -100,15 +128,15 @@ inline void ngp_load_inputs(__global const float *cam, int width, int n_pix, int
     for (int lane = 0; lane < DEFERRED_VEC; ++lane) {
         const int p = p0 + lane;
         float8 f = (float8)(0.0f);
-        float sh[16];
-        for (int i = 0; i < 16; ++i) sh[i] = 0.0f;
+        float sh[SH_DIM];
+        for (int i = 0; i < SH_DIM; ++i) sh[i] = 0.0f;
         if (p < n_pix) {
             f = vload8(p, feat);
             ngp_sh4(camera_ray_dir(cam, p % width, p / width), sh);
         }
         const float *fv = (const float *)&f;
-        for (int i = 0; i < 7; ++i) LANE(x[i], lane) = fv[i];
-        for (int i = 0; i < 16; ++i) LANE(x[7 + i], lane) = sh[i];
+        for (int i = 0; i < N_FEAT; ++i) LANE(x[i], lane) = fv[i];
+        for (int i = 0; i < SH_DIM; ++i) LANE(x[N_FEAT + i], lane) = sh[i];
         LANE(*opacity, lane) = f.s7;
     }
 }
@@ -120,6 +148,18 @@ __kernel void ngprt_deferred(__global const float *cam, const int width, const i
 {
     const int p0 = (int)get_global_id(0) * DEFERRED_VEC;
     if (p0 >= n_pix) return;
+    bool covered = false;
+    for (int lane = 0; lane < DEFERRED_VEC && p0 + lane < n_pix; ++lane)
+        covered = covered || feat[8 * (size_t)(p0 + lane) + 7] > 0.0f;
+    if (!covered) {
+        for (int lane = 0; lane < DEFERRED_VEC && p0 + lane < n_pix; ++lane) {
+            const int p = p0 + lane;
+            rgb[3 * p] = bg_r;
+            rgb[3 * p + 1] = bg_g;
+            rgb[3 * p + 2] = bg_b;
+        }
+        return;
+    }
     vfloat x[IN], h1[HID], h2[HID], opacity;
     ngp_load_inputs(cam, width, n_pix, p0, feat, x, &opacity);
     ngp_dense_relu(x, IN, params + P_W0, params + P_B0, h1);
@@ -131,9 +171,9 @@ __kernel void ngprt_deferred(__global const float *cam, const int width, const i
         o1 = o1 + h2[i] * w2[3 * i + 1];
         o2 = o2 + h2[i] * w2[3 * i + 2];
     }
-    const vfloat c0 = 1.0f / (1.0f + exp(-(x[0] + o0 + b2[0])));
-    const vfloat c1 = 1.0f / (1.0f + exp(-(x[1] + o1 + b2[1])));
-    const vfloat c2 = 1.0f / (1.0f + exp(-(x[2] + o2 + b2[2])));
+    const vfloat c0 = NGP_RECIP(1.0f + NGP_EXP(-(x[0] + o0 + b2[0])));
+    const vfloat c1 = NGP_RECIP(1.0f + NGP_EXP(-(x[1] + o1 + b2[1])));
+    const vfloat c2 = NGP_RECIP(1.0f + NGP_EXP(-(x[2] + o2 + b2[2])));
     const vfloat transparent = 1.0f - opacity;
     const vfloat r = c0 * opacity + bg_r * transparent;
     const vfloat g = c1 * opacity + bg_g * transparent;

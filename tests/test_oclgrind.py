@@ -2,7 +2,8 @@
 data race, no use of uninitialised values, no OpenCL API misuse.
 
 NGP-RT: generates camera rays (kernels/camera.cl) and renders a tiny random model (L_C=16,
-8x8 pixels) with every aggregation variant, both scene types and G on and off. NDRF: shades
+8x8 pixels) with every aggregation variant, both scene types: the exact build with G on and
+off, the fast build with 16 rays / pixels per work-item. NDRF: shades
 a tiny random model (K=2, 10x8 pixels, hits on the image border and misses) with both
 kernel sizes and both conv0 organisations, two frames each (kernels/ndrf_shade.cl). Each
 runs in a subprocess run by ``oclgrind --check-api --data-races --uninitialized``. One
@@ -41,10 +42,13 @@ for scene, c2w in views.items():
     for variant in VARIANTS:
         config = preset("tiny", variant=variant, scene=scene, L_C=16, log2_T=8, G_res=8)
         model = random_baked_model(config, 0, 1.0)
-        for use_G in (True, False):
-            keep.append(Renderer(model, use_G=use_G))
+        # The exact build with the device's lane widths, G on and off; the fast build
+        # with 16 rays / pixels per work-item (a CPU's vector lanes, half of
+        # them past the right edge of the image).
+        for use_G, exact, lanes in ((True, True, None), (False, True, None), (True, False, 16)):
+            keep.append(Renderer(model, use_G=use_G, exact=exact, rays=lanes, deferred_vec=lanes))
             out = keep[-1].render(camera, stats=True)
-            print("RENDERED", scene, variant, use_G, int(out["n_march"].sum()),
+            print("RENDERED", scene, variant, use_G, exact, int(out["n_march"].sum()),
                   int(out["n_occ"].sum()), flush=True)
 """
 ERROR = re.compile(r"invalid (read|write)|data race|uninitiali[sz]ed|runtime error|"
@@ -67,7 +71,7 @@ def test_kernels_clean_under_oclgrind():
     errors = [line for b in blocks for line in b.splitlines() if ERROR.search(line)]
     assert proc.returncode == 0, f"oclgrind run failed ({proc.returncode}):\n{log[-4000:]}"
     assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])
-    assert log.count("RENDERED") == 25, log[-4000:]
+    assert log.count("RENDERED") == 37, log[-4000:]
 
 
 NDRF_SCRIPT = """

@@ -1,6 +1,8 @@
-"""OpenCL NGP-RT renderer (kernels/ngprt_*.cl) against the numpy reference (render_ref.py).
+"""OpenCL NGP-RT renderer (kernels/ngprt_*.cl), exact build, against the numpy reference
+(render_ref.py); the fast build is held to the exact one in tests/test_render_fast.py.
 
-Random structured baked models (clrender.ngprt.random_model), small sizes, PoCL on the CPU.
+Random structured baked models (clrender.ngprt.random_model), small sizes, PoCL on the CPU,
+with the device's lane widths and with one ray / pixel per work-item (a GPU's layout).
 Tolerances (stated, not tuned): rgb max abs 1e-4; opacity abs 1e-4; depth relative 1e-4;
 marching and occupied points identical (positions and cells are bit-identical by
 construction, docs/ngprt.md). G on vs off: identical occupied points, images within 1e-6,
@@ -43,7 +45,8 @@ def _assert_matches(out: dict, ref: dict):
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_render_matches_reference(variant, scene):
     model, camera = _model(variant, scene), _camera(scene)
-    out = Renderer(model, use_G=True).render(camera, background=BACKGROUND, stats=True)
+    out = Renderer(model, use_G=True, exact=True).render(camera, background=BACKGROUND,
+                                                       stats=True)
     ref = render_reference(model, camera, background=BACKGROUND, use_G=True)
     assert out["rgb"].shape == (SIZE, SIZE, 3) and out["rgb"].dtype == np.float32
     assert out["n_occ"].sum() > 0, "test model has no occupied sample in view"
@@ -51,10 +54,35 @@ def test_render_matches_reference(variant, scene):
                           if k in out})
 
 
+@pytest.mark.parametrize("rays,deferred_vec", [(1, 1), (4, 2)])
+@pytest.mark.parametrize("scene", ["bounded", "unbounded"])
+@pytest.mark.parametrize("variant", ["separate-v", "mlp", "shared-inv"])
+def test_lane_widths_match_reference(variant, scene, rays, deferred_vec):
+    model, camera = _model(variant, scene, seed=4), _camera(scene, 29)
+    out = Renderer(model, use_G=True, exact=True, rays=rays,
+                   deferred_vec=deferred_vec).render(camera, background=BACKGROUND, stats=True)
+    ref = render_reference(model, camera, background=BACKGROUND, use_G=True)
+    assert out["n_occ"].sum() > 0, "test model has no occupied sample in view"
+    _assert_matches(out, ref)
+
+
+@pytest.mark.parametrize("scene", ["bounded", "unbounded"])
+def test_distance_grid_read_from_G_matches_reference(scene):
+    # L_C / G_res = 3 is no power of two: the kernel reads G itself instead of from the
+    # exit codes (render_cl.g_in_codes).
+    config = preset("tiny", variant="separate-v", scene=scene, L_C=48, log2_T=11, G_res=16)
+    model, camera = random_baked_model(config, 3, 1.0), _camera(scene, 27)
+    out = Renderer(model, use_G=True, exact=True).render(camera, background=BACKGROUND,
+                                                         stats=True)
+    ref = render_reference(model, camera, background=BACKGROUND, use_G=True)
+    assert out["n_occ"].sum() > 0, "test model has no occupied sample in view"
+    _assert_matches(out, ref)
+
+
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
 def test_three_levels_march_matches_reference(scene):
     model, camera = _model("separate-v", scene, L=3, seed=1), _camera(scene, 24)
-    out = Renderer(model, use_G=False).march(camera)
+    out = Renderer(model, use_G=False, exact=True).march(camera)
     origins, dirs = (a.reshape(-1, 3) for a in generate_rays(camera))
     ref = march_reference(model, origins, dirs, use_G=False)
     np.testing.assert_array_equal(out["n_occ"], ref["n_occ"])

@@ -18,37 +18,36 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ..device import device_type_name, event_ms, get_runtime
-from .config import DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM, VARIANTS
+from ..device import event_ms, get_runtime, padded, work_group_size
+from .config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM, VARIANT_CODES,
+                     kernel_constants)
 
 F32 = np.float32
-# The integer codes of VARIANT in kernels/ngprt_common.h (VARIANT_SUM ... VARIANT_SEPARATE_V).
-VARIANT_CODES = {"sum": 0, "mlp": 1, "shared-inv": 2, "separate-inv": 3, "shared-v": 4,
-                 "separate-v": 5}
-assert set(VARIANT_CODES) == set(VARIANTS)
-MARCH_LOCAL = (8, 8)          # a tile of pixels per work-group: neighbouring rays share cache
-# Small deferred work-groups: a CPU driver keeps every work-item's private activations
-# (~10 KB at DEFERRED_VEC=16) on one stack, and large groups overflow it. 16 pixels per
-# work-item measured fastest on the 2-core Xeon (PoCL): 68 ms vs 116 (8) and 205 (4)
-# for 400x400.
-DEFERRED_LOCAL = 8
 DEFERRED_PARAMS = ("deferred_w0", "deferred_b0", "deferred_w1", "deferred_b1",
                    "deferred_w2", "deferred_b2")
+LANE_WIDTHS = (1, 2, 4, 8, 16)      # vector widths OpenCL C has
 
 
-def kernel_defines(config, use_G: bool, deferred_vec: int = 1) -> tuple[dict, dict]:
+def lane_width(device, cap: int = 16) -> int:
+    """Rays (march) or pixels (deferred MLP) per work-item on ``device``: its preferred
+    float vector width (1 on GPUs, where work-items are the SIMD lanes; 8 or 16 on AVX
+    CPUs), rounded down to an OpenCL vector width and capped at ``cap``."""
+    width = max(1, int(device.preferred_vector_width_float))
+    return max(w for w in LANE_WIDTHS if w <= min(width, cap))
+
+
+def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1) -> tuple[dict, dict]:
     """The ``-D`` defines of the march and deferred programs for a model config: the
     shared constants of :func:`clrender.ngprt.config.kernel_constants` (the kernels define
-    none of their own) plus the model's sizes, variant and scene."""
-    from .config import VARIANT_CODES as codes, kernel_constants   # the one source
-
+    none of their own) plus the model's sizes, variant and scene, and the lanes per
+    work-item (``rays`` for the march, ``deferred_vec`` for the deferred MLP)."""
     shared = kernel_constants()
     march = {
         **shared, "L": config.L, "L_C": config.L_C, "LOG2_T": config.log2_T,
-        "VARIANT": codes[config.variant], "UNBOUNDED": config.scene == "unbounded",
+        "VARIANT": VARIANT_CODES[config.variant], "UNBOUNDED": config.scene == "unbounded",
         "USE_G": bool(use_G), "G_RES": config.G_res,
         "COARSE_BLOCK": config.coarse_block, "N_ATT": config.n_attention,
-        "N_INV": config.n_inv_attention,
+        "N_INV": config.n_inv_attention, "RAYS": rays, "G_IN_CODE": g_in_codes(config),
     }
     return march, {**shared, "DEFERRED_VEC": deferred_vec}
 
@@ -82,18 +81,45 @@ def deferred_params(model) -> np.ndarray:
                    ((n_in, h), (h,), (h, h), (h,), (h, 3), (3,)))
 
 
-def occupancy_mip(model) -> np.ndarray:
-    """``occupancy_0 .. occupancy_4`` concatenated (uint8), finest level first."""
+def g_in_codes(config) -> bool:
+    """Whether :func:`exit_codes` carries G: when ``L_C / G_res`` is a power of two, the G
+    voxel of a point is its finest cell shifted right (scaling by a power of two is exact
+    in float32, as for the mip levels)."""
+    ratio = config.L_C // config.G_res
+    return ratio & (ratio - 1) == 0
+
+
+def exit_codes(model, use_G: bool = True) -> np.ndarray:
+    """The occupancy mip (and G) as the march reads them: one uint16 per finest cell
+    (``L_C^3``, C order). Low byte: 0 where ``occupancy_0`` is occupied (a sample), else
+    ``1 + exit level``, the coarsest empty level (docs/ngprt.md "The march"); the mip is
+    a max-pool (validated), so the empty levels of a point are 0 .. exit level, all
+    decided by its finest cell: one read per lattice point instead of up to five. High
+    byte: the G value of the cell's G voxel where the march reads G (``use_G``, exit
+    level coarser than G, :func:`g_in_codes`), else 0.
+    """
     cfg = model.config
-    parts = []
+    code = np.zeros((cfg.L_C,) * 3, np.uint16)
     for lev in range(N_MIP):
         r = cfg.L_C >> lev
         a = np.asarray(model.arrays[f"occupancy_{lev}"])
         if a.shape != (r, r, r):
             raise ValueError(f"baked model: occupancy_{lev} has shape {a.shape}, "
                              f"expected ({r}, {r}, {r})")
-        parts.append((a != 0).astype(np.uint8).reshape(-1))
-    return np.concatenate(parts)
+        code += _upsampled(a == 0, 1 << lev)
+    if use_G and g_in_codes(cfg):
+        G = _upsampled(np.asarray(model.arrays["G"], np.uint16), cfg.L_C // cfg.G_res)
+        exit_res = cfg.L_C >> np.maximum(code.astype(np.int64) - 1, 0)
+        code |= np.where((code > 0) & (exit_res < cfg.G_res), G << 8, 0).astype(np.uint16)
+    return code.reshape(-1)
+
+
+def _upsampled(a: np.ndarray, factor: int) -> np.ndarray:
+    """(R, R, R) grid repeated ``factor`` times along each axis, as uint16."""
+    a = np.asarray(a, np.uint16)
+    for axis in range(3):
+        a = np.repeat(a, factor, axis=axis)
+    return a
 
 
 class Renderer:
@@ -106,21 +132,41 @@ class Renderer:
         device: OpenCL device spec or :class:`clrender.device.Runtime` (default
             ``$CLRENDER_DEVICE``).
         use_G: skip empty space with the occupancy distance grid G (paper §4.3).
+        exact: build the kernels exactly (``Runtime.program(exact=True)``: what the tests
+            compare with the numpy reference); default the fast build, which takes the
+            same samples and differs in exp-based values by a few ulps.
+        rays, deferred_vec: lanes per work-item of the march and the deferred MLP
+            (default :func:`lane_width` of the device).
     """
 
     SCALAR_STATS = {"Marching": "n_march", "Occupied": "n_occ"}
     RENDER_OPTIONS = {"use_G": bool}
     TIME_NOTE = "OpenCL kernel time per frame (ray marching + deferred MLP)"
 
-    def __init__(self, model, device=None, use_G: bool = True):
+    def __init__(self, model, device=None, use_G: bool = True, exact: bool = False,
+                 rays: int | None = None, deferred_vec: int | None = None):
         self.model, self.config, self.use_G = model, model.config, bool(use_G)
+        self.exact = bool(exact)
         self.runtime = rt = get_runtime(device)
-        self.deferred_vec = 16 if device_type_name(rt.device) == "CPU" else 1
-        march_defs, deferred_defs = kernel_defines(self.config, self.use_G, self.deferred_vec)
-        self._march = rt.program("ngprt_march.cl", march_defs).kernel("ngprt_march")
-        self._deferred = rt.program("ngprt_deferred.cl", deferred_defs).kernel("ngprt_deferred")
+        self.rays = rays or lane_width(rt.device)
+        self.deferred_vec = deferred_vec or lane_width(rt.device)
+        march_defs, deferred_defs = kernel_defines(self.config, self.use_G, self.deferred_vec,
+                                                   self.rays)
+        self._march = rt.program("ngprt_march.cl", march_defs, exact).kernel("ngprt_march")
+        self._deferred = rt.program("ngprt_deferred.cl", deferred_defs,
+                                    exact).kernel("ngprt_deferred")
         self.step = F32(model.step)
+        self._local = {}
         self._upload()
+
+    def _launch(self, name: str, kernel, global_size: tuple[int, ...]):
+        """(padded global size, local size) of a kernel launch, derived from the device
+        once per kernel (:func:`clrender.device.work_group_size`)."""
+        key = (name, global_size)
+        if key not in self._local:
+            self._local[key] = work_group_size(kernel, self.runtime.device, global_size)
+        local = self._local[key]
+        return padded(global_size, local), local
 
     def _buffer(self, array: np.ndarray) -> cl.Buffer:
         mf = cl.mem_flags
@@ -148,10 +194,11 @@ class Renderer:
         padded = np.zeros(blocks.shape[:4] + (stride,), F32)
         padded[..., :blocks.shape[4]] = blocks
         self._bufs = {
-            "occ": self._buffer(occupancy_mip(self.model)),
+            "occ": self._buffer(exit_codes(self.model, self.use_G)),
             "G": self._buffer(np.asarray(arrays["G"], np.uint8)),
             "block_index": self._buffer(np.asarray(arrays["coarse_block_index"], np.int32)),
-            "blocks": self._buffer(padded if padded.size else np.zeros(FEATURES, F32)),
+            # No block: one zero corner, so no read of a kernel is out of range.
+            "blocks": self._buffer(padded if padded.size else np.zeros(stride, F32)),
             "tables": self._buffer(tables),
             "fusion": self._buffer(fusion_params(self.model)),
             "deferred": self._buffer(deferred_params(self.model)),
@@ -174,10 +221,10 @@ class Renderer:
 
     def _enqueue_march(self, camera, out) -> cl.Event:
         cfg, b = self.config, self._bufs
-        lx, ly = MARCH_LOCAL
-        gsize = (-(-camera.width // lx) * lx, -(-camera.height // ly) * ly)
+        gsize, local = self._launch("march", self._march,
+                                    (-(-camera.width // self.rays), camera.height))
         return self._march(
-            self.runtime.queue, gsize, MARCH_LOCAL, out["cam"], np.int32(camera.width),
+            self.runtime.queue, gsize, local, out["cam"], np.int32(camera.width),
             np.int32(camera.height), self.step, F32(cfg.near), F32(cfg.far), b["occ"], b["G"],
             b["block_index"], b["blocks"], self.n_blocks, b["tables"], b["fusion"],
             out["feat"], out["depth"], out["n_march"], out["n_occ"])
@@ -217,8 +264,8 @@ class Renderer:
         out = self._outputs(camera)
         ev_march = self._enqueue_march(camera, out)
         bg = [F32(c) for c in (background if background is not None else (1.0, 1.0, 1.0))]
-        n_items = -(-n // (self.deferred_vec * DEFERRED_LOCAL)) * DEFERRED_LOCAL
-        ev_deferred = self._deferred(self.runtime.queue, (n_items,), (DEFERRED_LOCAL,),
+        gsize, local = self._launch("deferred", self._deferred, (-(-n // self.deferred_vec),))
+        ev_deferred = self._deferred(self.runtime.queue, gsize, local,
                                      out["cam"], np.int32(w), np.int32(n), out["feat"],
                                      self._bufs["deferred"], *bg, out["rgb"])
         result = {"rgb": self._read(out["rgb"], (h, w, 3), F32),

@@ -152,24 +152,91 @@ def skip_bounded(model, k, t, o, d, u, exit_lev, g, s, g_end) -> np.ndarray:
     return np.where(g > 0, np.maximum(k_next, k_G), k_next)
 
 
+# Unbounded skip: margins (docs/ngprt.md "skip"). A box is shrunk by 1/64 of the grid
+# cell it stands for on every face; the outer regions of the contraction are left
+# 2^-10 * |x|_inf before the planes |x_b| = |x_a| where it switches axis (a jump); the
+# cube inscribed in G's ball has half-side 0.57735 (< 1/sqrt(3)) of the ball's radius.
+BOX_MARGIN, REGION_SCALE, CUBE = F32(1 / 64), F32(1 - 2**-10), F32(0.57735)
+
+
+def _box_exit(o, d, t, lo, hi) -> np.ndarray:
+    """(M,) the largest t' >= t such that the ray stays in the box [lo, hi] (contracted
+    space, (M, 3)) over [t, t'] within the projective region of the contraction it is in
+    at t; t where the point at t is outside. Each face is a linear constraint
+    f + beta (t' - t) >= 0 there: c = x inside |x|_inf <= 1; outside, with a the axis of
+    |x|_inf = sigma x_a = m, c_b = x_b / m and sigma c_a = 2 - 1/m."""
+    p = o + t[:, None] * d
+    ap = np.abs(p)
+    m = ap.max(axis=1)
+    rows = np.arange(len(p))
+    a = np.where(ap[:, 0] == m, 0, np.where(ap[:, 1] == m, 1, 2))
+    sg = np.where(p[rows, a] > 0, F32(1.0), F32(-1.0))
+    ms, dm = sg * p[rows, a], sg * d[rows, a]
+    inner = m <= F32(1.0)
+    dt = np.full(len(p), np.inf, F32)
+    inside = np.ones(len(p), bool)
+
+    def constraint(f, beta, where):
+        nonlocal dt, inside
+        inside &= ~where | (f >= 0)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            dt = np.where(where & (beta < 0), np.minimum(dt, f / -beta), dt)
+
+    for b in range(3):
+        pb, db, lb, hb = p[:, b], d[:, b], lo[:, b], hi[:, b]
+        constraint(pb - lb, db, inner)
+        constraint(hb - pb, -db, inner)
+        constraint(F32(1.0) - pb, -db, inner)
+        constraint(F32(1.0) + pb, db, inner)
+        other = ~inner & (a != b)
+        constraint(ms * REGION_SCALE - pb, dm * REGION_SCALE - db, other)
+        constraint(ms * REGION_SCALE + pb, dm * REGION_SCALE + db, other)
+        constraint(pb - lb * ms, db - lb * dm, other)
+        constraint(hb * ms - pb, hb * dm - db, other)
+    outer = ~inner
+    constraint(ms - F32(1.0), dm, outer)
+    lo_a = np.where(sg > 0, lo[rows, a], -hi[rows, a])
+    hi_a = np.where(sg > 0, hi[rows, a], -lo[rows, a])
+    with np.errstate(divide="ignore"):
+        constraint(ms - F32(1.0) / (F32(2.0) - lo_a), dm, outer & (lo_a < 2))
+        constraint(F32(1.0) / (F32(2.0) - hi_a) - ms, -dm, outer & (hi_a < 2))
+    inside &= ~(outer & (lo_a >= 2))
+    return np.where(inside, t + dt, t)
+
+
 def skip_unbounded(model, k, o, d, u, exit_lev, g, s, g_end) -> np.ndarray:
-    """Next lattice index (> k) after an empty point, by walking the lattice with
-    arithmetic only (no memory reads): on while the point stays in the empty mip cell or,
-    when G was read, closer than ``g / G_res`` (u units) to u."""
+    """Next lattice index (> k) after an empty point (no memory reads): the first lattice
+    point outside both the empty mip cell and, when G was read, the ball of radius
+    ``g / G_res`` (u units) about u, as a walk point by point would find it, but
+    jumping in closed form over the points in the shrunk cell or the shrunk cube
+    inscribed in the ball (:func:`_box_exit`); the points after a jump are tested one by
+    one until one is outside both or inside a shrunk box again."""
     cfg = model.config
     res = cfg.L_C >> exit_lev
     cell = _cells(u, res)
     radius = g.astype(F32) / F32(cfg.G_res)        # u is in [0, 1]^3
-    k = k + 1
-    walking = _lattice_g(k, s) < g_end
+    size = F32(4.0) / res.astype(F32)[:, None]     # a cell, in contracted units
+    lo = cell.astype(F32) * size - F32(2.0) + size * BOX_MARGIN
+    hi = (cell + 1).astype(F32) * size - F32(2.0) - size * BOX_MARGIN
+    half = F32(4.0) * radius * CUBE - F32(4.0) / F32(cfg.G_res) * BOX_MARGIN
+    cube = (g > 0) & (half > 0)
+    c0 = u * F32(4.0) - F32(2.0)
+    lim = g_end / s + F32(2.0)
+    k = k.copy()
+    walking = np.ones(len(k), bool)
     while walking.any():
         w = np.flatnonzero(walking)
+        t = unwarp(_lattice_g(k[w], s), True)
+        T = _box_exit(o[w], d[w], t, lo[w], hi[w])
+        Tc = _box_exit(o[w], d[w], t, c0[w] - half[w, None], c0[w] + half[w, None])
+        T = np.where(cube[w], np.maximum(T, Tc), T)
+        x = np.minimum(warp(T, True) / s - F32(1e-3), lim[w])
+        k[w] = np.maximum(k[w] + 1, np.ceil(x).astype(np.int64))
         uk = _point_u(cfg, o[w], d[w], unwarp(_lattice_g(k[w], s), True))
         same = np.all(_cells(uk, res[w]) == cell[w], axis=1)
         du = uk - u[w]
         dist = np.sqrt(du[:, 0] * du[:, 0] + du[:, 1] * du[:, 1] + du[:, 2] * du[:, 2])
         stay = same | ((g[w] > 0) & (dist < radius[w]))
-        k[w[stay]] += 1
         walking[w] = stay & (_lattice_g(k[w], s) < g_end[w])
     return k
 
