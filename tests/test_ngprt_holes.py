@@ -18,10 +18,9 @@ import numpy as np
 import pytest
 
 from clrender.camera import Camera, generate_rays, look_at
-from clrender.ngprt.baked import (BakedFormatError, BakedModel, build_distance_grid, build_mip,
-                                  expected_arrays, sparse_coarse_grid, validate)
-from clrender.ngprt.config import FEATURES, MAX_LATTICE_POINTS, ModelConfig, preset
-from clrender.ngprt.random_model import random_baked_model
+from clrender.ngprt.baked import BakedFormatError, BakedModel, validate
+from clrender.ngprt.config import MAX_LATTICE_POINTS, ModelConfig, preset
+from clrender.ngprt.random_model import empty_model_with_occupancy, random_baked_model
 from clrender.ngprt.render_ref import march_reference, ray_range
 from clrender.ngprt.space import cell_index, to_grid
 
@@ -57,15 +56,7 @@ def patch_model():
     occ = np.zeros((L_C,) * 3, np.uint8)
     for lo, hi in _patch_boxes():
         occ[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = 1
-    block_index, blocks = sparse_coarse_grid(
-        lambda c: np.tile(np.array([-30.0] + [0.0] * (FEATURES - 1), F32), (len(c), 1)),
-        occ, cfg.coarse_block, channels=FEATURES)
-    arrays = {n: np.zeros(shape, dtype) for n, (shape, dtype) in expected_arrays(cfg, 0).items()}
-    arrays["coarse_block_index"], arrays["coarse_blocks"] = block_index, blocks
-    for lev, grid in enumerate(build_mip(occ)):
-        arrays[f"occupancy_{lev}"] = grid
-    arrays["G"] = build_distance_grid(occ, cfg.G_res)
-    return BakedModel(cfg, GAMMA, arrays)
+    return empty_model_with_occupancy(cfg, occ, GAMMA)
 
 
 def near_axis_rays(n: int, seed: int = 0, tiny_range=(2e-4, 4e-3)):

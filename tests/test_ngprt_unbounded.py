@@ -21,9 +21,9 @@ import pytest
 
 from clrender.camera import Camera, generate_rays, look_at
 from clrender.ngprt import render_ref
-from clrender.ngprt.baked import (BakedModel, build_distance_grid, build_mip, expected_arrays,
-                                  sparse_coarse_grid, validate)
-from clrender.ngprt.config import FEATURES, ModelConfig
+from clrender.ngprt.baked import validate
+from clrender.ngprt.config import ModelConfig
+from clrender.ngprt.random_model import empty_model_with_occupancy
 from clrender.ngprt.render_ref import _cells, _lattice_g, _point_u, march_reference, ray_range
 from clrender.ngprt.space import cell_index, to_grid, unwarp, warp
 
@@ -44,15 +44,7 @@ def box_model():
         size = rng.integers(2, 7, 3)
         lo = rng.integers(16, 48 - 6, 3) if i % 2 else rng.integers(0, L_C - 6, 3)
         occ[lo[0]:lo[0] + size[0], lo[1]:lo[1] + size[1], lo[2]:lo[2] + size[2]] = 1
-    block_index, blocks = sparse_coarse_grid(
-        lambda c: np.tile(np.array([-30.0] + [0.0] * (FEATURES - 1), F32), (len(c), 1)),
-        occ, cfg.coarse_block, channels=FEATURES)
-    arrays = {n: np.zeros(shape, dtype) for n, (shape, dtype) in expected_arrays(cfg, 0).items()}
-    arrays["coarse_block_index"], arrays["coarse_blocks"] = block_index, blocks
-    for lev, grid in enumerate(build_mip(occ)):
-        arrays[f"occupancy_{lev}"] = grid
-    arrays["G"] = build_distance_grid(occ, cfg.G_res)
-    model = BakedModel(cfg, GAMMA, arrays)
+    model = empty_model_with_occupancy(cfg, occ, GAMMA)
     validate(model)
     return model
 

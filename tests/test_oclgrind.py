@@ -55,20 +55,26 @@ ERROR = re.compile(r"invalid (read|write)|data race|uninitiali[sz]ed|runtime err
                    r"out of bounds|oclgrind -|error", re.IGNORECASE)
 
 
-@pytest.mark.oclgrind
-@pytest.mark.skipif(shutil.which("oclgrind") is None,
-                    reason="the oclgrind executable is not on PATH (apt install oclgrind)")
-def test_kernels_clean_under_oclgrind():
+def _oclgrind(script: str) -> tuple[subprocess.CompletedProcess, str, list[str]]:
+    """Runs ``script`` under Oclgrind; returns the process, its log and the error lines
+    (the one known clGetDeviceInfo report left out, see the module doc)."""
     root = Path(__file__).resolve().parents[1]
     env = dict(os.environ, CLRENDER_DEVICE="",
                PYTHONPATH=os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]))
     proc = subprocess.run(
         ["oclgrind", "--check-api", "--data-races", "--uninitialized", sys.executable, "-c",
-         SCRIPT], capture_output=True, text=True, env=env, cwd=root, timeout=300)
+         script], capture_output=True, text=True, env=env, cwd=root, timeout=300)
     log = proc.stdout + proc.stderr
     blocks = [b for b in re.split(r"\n\s*\n", log)
               if not ("clGetDeviceInfo" in b and "CL_INVALID_VALUE" in b and "param_name" in b)]
-    errors = [line for b in blocks for line in b.splitlines() if ERROR.search(line)]
+    return proc, log, [line for b in blocks for line in b.splitlines() if ERROR.search(line)]
+
+
+@pytest.mark.oclgrind
+@pytest.mark.skipif(shutil.which("oclgrind") is None,
+                    reason="the oclgrind executable is not on PATH (apt install oclgrind)")
+def test_kernels_clean_under_oclgrind():
+    proc, log, errors = _oclgrind(SCRIPT)
     assert proc.returncode == 0, f"oclgrind run failed ({proc.returncode}):\n{log[-4000:]}"
     assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])
     assert log.count("RENDERED") == 37, log[-4000:]
@@ -99,21 +105,6 @@ for layout in ({"H_VEC": 8, "ACCUMULATORS": 0}, {"H_VEC": 16, "ACCUMULATORS": 16
               round(float(hits.coverage.mean()), 3),
               bool(hits.coverage[-1, -1]), flush=True)
 """
-
-
-def _oclgrind(script: str) -> tuple[subprocess.CompletedProcess, str, list[str]]:
-    """Runs ``script`` under Oclgrind; returns the process, its log and the error lines
-    (the one known clGetDeviceInfo report left out, see the module doc)."""
-    root = Path(__file__).resolve().parents[1]
-    env = dict(os.environ, CLRENDER_DEVICE="",
-               PYTHONPATH=os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]))
-    proc = subprocess.run(
-        ["oclgrind", "--check-api", "--data-races", "--uninitialized", sys.executable, "-c",
-         script], capture_output=True, text=True, env=env, cwd=root, timeout=300)
-    log = proc.stdout + proc.stderr
-    blocks = [b for b in re.split(r"\n\s*\n", log)
-              if not ("clGetDeviceInfo" in b and "CL_INVALID_VALUE" in b and "param_name" in b)]
-    return proc, log, [line for b in blocks for line in b.splitlines() if ERROR.search(line)]
 
 
 @pytest.mark.oclgrind

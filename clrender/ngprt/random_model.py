@@ -121,3 +121,19 @@ def random_baked_model(config: ModelConfig, seed: int = 0, gamma: float = 1.0) -
     model = BakedModel(config, float(gamma), arrays)
     validate(model, f"random_baked_model(seed={seed})")
     return model
+
+
+def empty_model_with_occupancy(config: ModelConfig, occupancy_0: np.ndarray,
+                               gamma: float = 1.0) -> BakedModel:
+    """A model whose occupied cells are ``occupancy_0`` ((L_C,)*3, nonzero = occupied) and
+    whose density is negligible (sigma logit -30) everywhere: for march tests, where what
+    matters is which lattice points are taken, not what they show."""
+    block_index, blocks = sparse_coarse_grid(
+        lambda c: np.tile(np.array([-30.0] + [0.0] * (FEATURES - 1), np.float32), (len(c), 1)),
+        occupancy_0, config.coarse_block, channels=FEATURES)
+    arrays = {n: np.zeros(shape, dtype) for n, (shape, dtype) in expected_arrays(config, 0).items()}
+    arrays["coarse_block_index"], arrays["coarse_blocks"] = block_index, blocks
+    for lev, grid in enumerate(build_mip(occupancy_0)):
+        arrays[f"occupancy_{lev}"] = grid
+    arrays["G"] = build_distance_grid(occupancy_0, config.G_res)
+    return BakedModel(config, gamma, arrays)
