@@ -85,7 +85,8 @@ def markdown(table, results: list[dict], meta: dict) -> str:
             cells.append(" + ".join(f"{k} {v:.1f}" for k, v in m["stages"].items()))
         cells += [f"{m['size_MB']:.1f}", f"{m['train_minutes']:.1f}"]
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", f"Time: {results[0].get('time_note', 'time per frame')}, median of "
+    notes = list(dict.fromkeys(m.get("time_note", "time per frame") for m in results))
+    lines += ["", f"Time: {'; '.join(notes)}, median of "
               f"{results[0]['time']['n']} timed frames. Speed-up: the baseline row's time "
               "(" + (", ".join(sorted({r.baseline for r in table.rows if r.baseline})) or "none")
               + ") over this row's, measured in the same run. " + _lpips_note(table, results), ""]
@@ -129,7 +130,8 @@ def _plot(table, results: list[dict]) -> bytes:
 
 
 def _stat_columns(results: list[dict]) -> list[str]:
-    return [c for c in STAT_COLUMNS if results and c in results[0]]
+    """The statistics columns any row reports (a table may mix methods)."""
+    return [c for c in STAT_COLUMNS if any(c in m for m in results)]
 
 
 def _option_keys(table) -> list[str]:
@@ -152,7 +154,7 @@ def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
                "PSNR": m["PSNR"], "SSIM": m["SSIM"], "time_ms": m["time"], "wall_ms": m["wall_ms"],
                "stages_ms": m.get("stages", {}), "FPS": 1000.0 / m["time"]["median"],
                "time_ms_at_width": {str(w): t for w, t in m.get("time_at", {}).items()},
-               **{c: m[c] for c in _stat_columns(results)}, "size_MB": m["size_MB"],
+               **{c: m.get(c) for c in _stat_columns(results)}, "size_MB": m["size_MB"],
                "train_minutes": m["train_minutes"], "model_key": m["model_key"],
                "baseline": row.baseline, "speedup": ox,
                "sample": str(sample.relative_to(out_dir)),
@@ -173,7 +175,7 @@ def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
         writer.writerow([r["row"]] + [r.get(k, "") for k in options]
                         + [f"{r['PSNR']:.4f}", f"{r['SSIM']:.4f}", f"{r['time_ms']['median']:.3f}",
                            f"{r['time_ms']['p10']:.3f}", f"{r['time_ms']['p90']:.3f}",
-                           f"{r['FPS']:.2f}"] + [f"{r[c]:.2f}" for c in stats]
+                           f"{r['FPS']:.2f}"] + ["" if r[c] is None else f"{r[c]:.2f}" for c in stats]
                         + [f"{r['size_MB']:.3f}", f"{r['train_minutes']:.2f}"]
                         + [r["paper"].get(c, "") for c in table.paper_columns])
     write_atomic(out_dir / f"{table.key}.csv", buf.getvalue())

@@ -86,3 +86,22 @@ def test_unknown_baseline_is_an_error(tmp_path, monkeypatch):
     monkeypatch.setattr(ablation, "ABLATIONS_DIR", tmp_path)
     with pytest.raises(ValueError, match="unknown baseline 'nope'"):
         ablation.load_table("bad")
+
+
+def test_a_table_may_mix_methods(tmp_path):
+    """ndrf-teacher: an NGP-RT row (marching statistics) beside an NDRF row (coverage)."""
+    t = ablation.load_table("ndrf-teacher")
+    assert [r.method for r in t.rows] == ["ngprt", "ndrf"] and t.timing_sizes == (800,)
+    teacher = {**_measured(23.0, 40.0), "time_note": "kernels", "time_at": {800: _measured(0, 600.0)["time"]},
+               "stages": {"march": 30.0, "deferred": 10.0}}
+    student = {k: v for k, v in _measured(21.0, 20.0).items() if k not in ("Marching", "Occupied")}
+    student.update(Coverage=0.5, time_note="embree + kernels", time_at={800: _measured(0, 300.0)["time"]},
+                   stages={"intersect": 12.0, "gather": 3.0, "conv0": 4.0, "conv1": 1.0})
+    meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4",
+            "git_revision": "r", "date": "d"}
+    md = report.write_table(tmp_path, t, [teacher, student], meta)
+    row = next(l for l in md.splitlines() if l.startswith("| Student"))
+    assert "| 2.00x |" in row and "| 300.0 |" in row and "intersect 12.0" in row
+    assert "kernels; embree + kernels" in md
+    data = json.loads((tmp_path / "ndrf-teacher.json").read_text())
+    assert data["rows"][1]["Marching"] is None and data["rows"][1]["Coverage"] == 0.5
