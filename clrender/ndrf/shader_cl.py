@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ..device import device_type_name, event_ms, get_runtime
+from ..device import device_type_name, event_ms, get_runtime, padded, work_group_size
 from .baked import validate
 from .config import FEATURES, NDRFConfig
 
@@ -105,18 +105,6 @@ def packed_weights(model, defines: dict) -> dict:
     return {"w0": w0, "b0": b0, "w1": w1, "b1": np.asarray(a["conv1_b"], F32)}
 
 
-def local_size(kernel: cl.Kernel, device: cl.Device) -> tuple[int, int]:
-    """A 2D work-group tile from the device's limits: the kernel's preferred work-group
-    size multiple across x, and rows up to 8 such multiples per group, within the device's
-    and the kernel's maximum work-group sizes."""
-    info = cl.kernel_work_group_info
-    most = min(device.max_work_group_size,
-               kernel.get_work_group_info(info.WORK_GROUP_SIZE, device))
-    mult = kernel.get_work_group_info(info.PREFERRED_WORK_GROUP_SIZE_MULTIPLE, device)
-    lx = max(1, min(mult, most))
-    return lx, max(1, min(most, 8 * lx) // lx)
-
-
 class Shader:
     """Shades NDRF hits with OpenCL.
 
@@ -134,7 +122,7 @@ class Shader:
         self.defines = kernel_defines(self.config, layout["H_VEC"], layout["ACCUMULATORS"])
         program = rt.program("ndrf_shade.cl", self.defines)
         self._kernels = {name: program.kernel(name) for name in KERNELS}
-        self._local = {name: local_size(k, rt.device) for name, k in self._kernels.items()}
+        self._local: dict = {}
         self._zero = program.kernel("ndrf_zero")
         self._n_faces = [len(model.mesh(k)[1]) for k in range(self.config.K)]
         arrays = {**packed_meshes(model), **packed_weights(model, self.defines)}
@@ -201,9 +189,15 @@ class Shader:
                          b["covered"])
 
     def _run(self, name: str, items_x: int, items_y: int, *args) -> cl.Event:
-        lx, ly = self._local[name]
-        gsize = (_round_up(items_x, lx), _round_up(items_y, ly))
-        return self._kernels[name](self.runtime.queue, gsize, (lx, ly), *args)
+        """Enqueue kernel ``name`` over ``items_x`` x ``items_y`` work-items; the local size
+        comes from the device, once per (kernel, size) (:func:`clrender.device.work_group_size`)."""
+        key = (name, items_x, items_y)
+        if key not in self._local:
+            self._local[key] = work_group_size(self._kernels[name], self.runtime.device,
+                                               (items_x, items_y))
+        local = self._local[key]
+        return self._kernels[name](self.runtime.queue, padded((items_x, items_y), local), local,
+                                   *args)
 
     def shade(self, camera, hits_tri, hits_bary, background=None):
         """Shade one frame.
