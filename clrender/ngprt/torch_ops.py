@@ -247,6 +247,12 @@ class _WeightedGather(torch.autograd.Function):
         return grad, None, None
 
 
+def weighted_gather(table: torch.Tensor, idx: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+    """(N, F) ``sum_j w[n, j] * table[idx[n, j]]`` for a (rows, F) table, idx (N, J) int64
+    and w (N, J); differentiable in ``table`` only (also NDRF's per-vertex features)."""
+    return _WeightedGather.apply(table, idx, w)
+
+
 def _level_indices(base: torch.Tensor, res, T: int, dense: bool) -> torch.Tensor:
     """(N, lev, 8) table rows of the corners ``base + c`` of a group of levels.
 
@@ -297,6 +303,6 @@ def grid_lookup(tables: torch.Tensor, u: torch.Tensor, resolutions, dense=None) 
     wx = torch.stack([1.0 - w1, w1], -1)                             # (N, lev, 3, 2)
     w = (wx[:, :, 0, :, None, None] * wx[:, :, 1, None, :, None]
          * wx[:, :, 2, None, None, :]).flatten(2)                    # (N, lev, 8)
-    out = _WeightedGather.apply(tables.reshape(n_lev * T, n_feat), idx.reshape(-1, 8),
-                                w.reshape(-1, 8))
+    out = weighted_gather(tables.reshape(n_lev * T, n_feat), idx.reshape(-1, 8),
+                          w.reshape(-1, 8))
     return out.reshape(len(u), n_lev, n_feat)
