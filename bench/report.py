@@ -10,6 +10,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
+from bench import seeds
 from clrender.atomic import write_atomic
 
 # Our measurement behind each paper column (None: we cannot measure it here).
@@ -54,32 +55,80 @@ def speedups(table, results: list[dict], key=lambda row, m: m["time"]["median"])
     return out
 
 
-def markdown(table, results: list[dict], meta: dict) -> str:
-    """The table with each paper column as "ours" and "paper" sub-columns."""
-    extra = [c for c in _stat_columns(results) if c not in table.paper_columns]
+def _n_seeds(results: list[dict]) -> int:
+    """Seeds behind each row (1 for results not from :func:`bench.seeds.aggregate`)."""
+    return len(results[0].get("seeds", [None]))
+
+
+def _ours(col: str, m: dict, n_seeds: int) -> str:
+    """Our cell of a column: the value, or with several seeds "mean ± std"."""
+    value = OURS[col](m)
+    if n_seeds == 1 or value is None:
+        return _fmt(col, value)
+    s = seeds.spread([OURS[col](p) for p in m["per_seed"]])
+    return f"{_fmt(col, value)} ± {_fmt(col, None if s is None else s['std'])}"
+
+
+def effects(table, results: list[dict]) -> list[dict | None]:
+    """Per row against its baseline over seeds (results from :func:`bench.seeds.aggregate`,
+    two or more seeds): {mean, std} of the paired PSNR differences (dB, row minus baseline,
+    same seed), ``paper`` (the paper's difference, None where it lacks a PSNR) and
+    ``verdict``; None for rows without a baseline and for the baseline itself."""
+    psnr = {row.name: [p["PSNR"] for p in m["per_seed"]] for row, m in zip(table.rows, results)}
+    paper_psnr = {row.name: row.paper.get("PSNR") for row in table.rows}
+    out = []
+    for row in table.rows:
+        if row.baseline in (None, row.name):
+            out.append(None)
+            continue
+        mean, std = seeds.paired_delta(psnr[row.name], psnr[row.baseline])
+        mine, base = paper_psnr[row.name], paper_psnr[row.baseline]
+        paper = None if mine is None or base is None else mine - base
+        out.append({"mean": mean, "std": std, "paper": paper,
+                    "verdict": seeds.verdict(paper, mean, std, len(psnr[row.name]))})
+    return out
+
+
+def _head(table, extra: list[str], n_seeds: int) -> list[str]:
     head = ["Row"]
     for col in table.paper_columns:
         head += [col, f"{col} (paper)"]
-    ratios = any(r.baseline for r in table.rows)
-    if ratios:
+    if any(r.baseline for r in table.rows):
         head += ["Speed-up", "Speed-up (paper)"]
+        if n_seeds > 1:
+            head += ["ΔPSNR vs baseline", "ΔPSNR (paper)", "Verdict"]
     head += [f"Time at width {w} (ms)" for w in table.timing_sizes]
-    head += extra + ["Time p10-p90 (ms)"] + (["Stages (ms)"] if table.show_stages else []) \
+    return head + extra + ["Time p10-p90 (ms)"] + (["Stages (ms)"] if table.show_stages else []) \
         + ["Size (MB)", "Train (min)"]
+
+
+def markdown(table, results: list[dict], meta: dict) -> str:
+    """The table with each paper column as "ours" and "paper" sub-columns; with several
+    seeds (results from :func:`bench.seeds.aggregate`) ours are "mean ± std" and rows with
+    a baseline say whether the paper's PSNR difference reproduces."""
+    n = _n_seeds(results)
+    extra = [c for c in _stat_columns(results) if c not in table.paper_columns]
+    head = _head(table, extra, n)
+    ratios = any(r.baseline for r in table.rows)
     ours_x = speedups(table, results)
     paper_x = speedups(table, results, key=lambda row, m: row.paper.get("Time (ms)"))
+    deltas = effects(table, results) if ratios and n > 1 else [None] * len(results)
     lines = [f"## {table.title}", "",
              f"Ours: {meta['scene']} scene, `{meta['preset']}` preset, {meta['device']}, "
              f"test views at {meta['resolution']}. Paper: {table.paper_source}.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for row, m, ox, px in zip(table.rows, results, ours_x, paper_x):
+    for row, m, ox, px, d in zip(table.rows, results, ours_x, paper_x, deltas):
         cells = [row.name]
         for col in table.paper_columns:
-            cells += [_fmt(col, OURS[col](m)), _fmt(col, row.paper.get(col))]
+            cells += [_ours(col, m, n), _fmt(col, row.paper.get(col))]
         if ratios:
             cells += ["" if ox is None else f"{ox:.2f}x", "" if px is None else f"{px:.2f}x"]
+            if n > 1:
+                cells += ["", "", ""] if d is None else [
+                    f"{d['mean']:+.2f} ± {d['std']:.2f}",
+                    "" if d["paper"] is None else f"{d['paper']:+.2f}", d["verdict"]]
         cells += [f"{m['time_at'][w]['median']:.1f}" for w in table.timing_sizes]
-        cells += [_fmt(c, OURS[c](m)) for c in extra]
+        cells += [_ours(c, m, n) for c in extra]
         cells.append(f"{m['time']['p10']:.1f}-{m['time']['p90']:.1f}")
         if table.show_stages:
             cells.append(" + ".join(f"{k} {v:.1f}" for k, v in m["stages"].items()))
@@ -87,10 +136,26 @@ def markdown(table, results: list[dict], meta: dict) -> str:
         lines.append("| " + " | ".join(cells) + " |")
     notes = list(dict.fromkeys(m.get("time_note", "time per frame") for m in results))
     lines += ["", f"Time: {'; '.join(notes)}, median of "
-              f"{results[0]['time']['n']} timed frames. Speed-up: the baseline row's time "
+              f"{results[0]['time']['n']} timed frames{' per seed' if n > 1 else ''}. "
+              "Speed-up: the baseline row's time "
               "(" + (", ".join(sorted({r.baseline for r in table.rows if r.baseline})) or "none")
-              + ") over this row's, measured in the same run. " + _lpips_note(table, results), ""]
+              + ") over this row's, measured in the same run. " + _lpips_note(table, results)
+              + (_seeds_note(results[0]["seeds"], ratios) if n > 1 else ""), ""]
     return "\n".join(lines)
+
+
+def _seeds_note(seed_list: list[int], ratios: bool) -> str:
+    n = len(seed_list)
+    note = (f"\n\nOurs: mean ± sample standard deviation over {n} training seeds "
+            f"({', '.join(map(str, seed_list))}); times, sizes and training minutes are means; "
+            f"the sample renders are seed {seed_list[0]}'s.")
+    if ratios:
+        note += (" ΔPSNR vs baseline: this row's PSNR minus the baseline's trained with the "
+                 "same seed, mean ± standard deviation over the seeds; the paper's from its "
+                 f"PSNR column. Verdict: with N = {n} seeds, \"reproduces\" where |mean Δ| > "
+                 "2 × std(Δ) / √N and Δ has the paper's sign, \"opposite\" where it is beyond "
+                 "that with the other sign, \"within spread\" where |mean Δ| ≤ 2 × std(Δ) / √N.")
+    return note
 
 
 def _lpips_note(table, results: list[dict]) -> str:
@@ -141,44 +206,71 @@ def _option_keys(table) -> list[str]:
     return keys
 
 
-def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
-    """Write TABLE.md/.csv/.json/.png and one sample render per row; returns the Markdown."""
-    md = markdown(table, results, meta)
-    write_atomic(out_dir / f"{table.key}.md", md)
-    records = []
-    for row, m, ox in zip(table.rows, results, speedups(table, results)):
-        sample = out_dir / table.key / f"{slug(row.name)}.png"
-        write_atomic(sample, iio.imwrite("<bytes>", (np.clip(m["sample"], 0, 1) * 255 + 0.5)
-                                   .astype(np.uint8), extension=".png"))
-        rec = {"row": row.name, "method": row.method, **row.model, **row.render,
-               "PSNR": m["PSNR"], "SSIM": m["SSIM"], "time_ms": m["time"], "wall_ms": m["wall_ms"],
-               "stages_ms": m.get("stages", {}), "FPS": 1000.0 / m["time"]["median"],
-               "time_ms_at_width": {str(w): t for w, t in m.get("time_at", {}).items()},
-               **{c: m.get(c) for c in _stat_columns(results)}, "size_MB": m["size_MB"],
-               "train_minutes": m["train_minutes"], "model_key": m["model_key"],
-               "baseline": row.baseline, "speedup": ox,
-               "sample": str(sample.relative_to(out_dir)),
-               "paper": row.paper}
-        records.append(rec)
-    write_atomic(out_dir / f"{table.key}.json", json.dumps({**meta, "table": table.key,
-                                                      "title": table.title,
-                                                      "paper_source": table.paper_source,
-                                                      "rows": records}, indent=2))
-    buf = io.StringIO()
-    options, stats = _option_keys(table), _stat_columns(results)
-    cols = ["row"] + options + ["PSNR", "SSIM", "time_ms_median", "time_ms_p10", "time_ms_p90",
-                                "FPS"] + stats + ["size_MB", "train_minutes"]
+def _spreads(m: dict) -> dict | None:
+    """{column: spread over seeds} of every column of OURS this row has a value for."""
+    if "per_seed" not in m:
+        return None
+    out = {col: seeds.spread([f(p) for p in m["per_seed"]]) for col, f in OURS.items()}
+    return {col: s for col, s in out.items() if s is not None}
+
+
+def _record(row, m: dict, stats: list[str], speedup, effect, sample: str) -> dict:
+    """The JSON record of one row."""
+    return {"row": row.name, "method": row.method, **row.model, **row.render,
+            "PSNR": m["PSNR"], "SSIM": m["SSIM"], "time_ms": m["time"], "wall_ms": m["wall_ms"],
+            "stages_ms": m.get("stages", {}), "FPS": 1000.0 / m["time"]["median"],
+            "time_ms_at_width": {str(w): t for w, t in m.get("time_at", {}).items()},
+            **{c: m.get(c) for c in stats}, "size_MB": m["size_MB"],
+            "train_minutes": m["train_minutes"], "model_key": m["model_key"],
+            "baseline": row.baseline, "speedup": speedup, "sample": sample, "paper": row.paper,
+            "seeds": m.get("seeds"), "per_seed": m.get("per_seed"), "spread": _spreads(m),
+            "delta_PSNR": effect}
+
+
+def _csv(table, records: list[dict], stats: list[str], n_seeds: int) -> str:
+    options, spread = _option_keys(table), ("PSNR", "SSIM") if n_seeds > 1 else ()
+    cols = ["row"] + options + ["PSNR", "SSIM"] + [f"{c}_std" for c in spread] \
+        + ["time_ms_median", "time_ms_p10", "time_ms_p90", "FPS"] + stats \
+        + ["size_MB", "train_minutes"]
     cols += [f"paper_{c}" for c in table.paper_columns]
+    buf = io.StringIO()
     writer = csv.writer(buf)
     writer.writerow(cols)
     for r in records:
         writer.writerow([r["row"]] + [r.get(k, "") for k in options]
-                        + [f"{r['PSNR']:.4f}", f"{r['SSIM']:.4f}", f"{r['time_ms']['median']:.3f}",
+                        + [f"{r['PSNR']:.4f}", f"{r['SSIM']:.4f}"]
+                        + [f"{r['spread'][c]['std']:.4f}" for c in spread]
+                        + [f"{r['time_ms']['median']:.3f}",
                            f"{r['time_ms']['p10']:.3f}", f"{r['time_ms']['p90']:.3f}",
                            f"{r['FPS']:.2f}"] + ["" if r[c] is None else f"{r[c]:.2f}" for c in stats]
                         + [f"{r['size_MB']:.3f}", f"{r['train_minutes']:.2f}"]
                         + [r["paper"].get(c, "") for c in table.paper_columns])
-    write_atomic(out_dir / f"{table.key}.csv", buf.getvalue())
+    return buf.getvalue()
+
+
+def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
+    """Write TABLE.md/.csv/.json/.png and one sample render per row; returns the Markdown.
+
+    ``results``: one :func:`bench.measure.measure_row` dict per row (plus ``train_minutes``,
+    ``model_key``), or over several seeds one :func:`bench.seeds.aggregate` dict per row
+    (JSON rows then carry ``seeds``, ``per_seed``, ``spread``, ``delta_PSNR``; the CSV
+    ``PSNR_std`` and ``SSIM_std``).
+    """
+    md = markdown(table, results, meta)
+    write_atomic(out_dir / f"{table.key}.md", md)
+    n, stats = _n_seeds(results), _stat_columns(results)
+    deltas = effects(table, results) if n > 1 else [None] * len(results)
+    records = []
+    for row, m, ox, d in zip(table.rows, results, speedups(table, results), deltas):
+        sample = out_dir / table.key / f"{slug(row.name)}.png"
+        write_atomic(sample, iio.imwrite("<bytes>", (np.clip(m["sample"], 0, 1) * 255 + 0.5)
+                                   .astype(np.uint8), extension=".png"))
+        records.append(_record(row, m, stats, ox, d, str(sample.relative_to(out_dir))))
+    write_atomic(out_dir / f"{table.key}.json", json.dumps({**meta, "table": table.key,
+                                                      "title": table.title,
+                                                      "paper_source": table.paper_source,
+                                                      "rows": records}, indent=2))
+    write_atomic(out_dir / f"{table.key}.csv", _csv(table, records, stats, n))
     write_atomic(out_dir / f"{table.key}.png", _plot(table, results))
     return md
 

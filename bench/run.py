@@ -3,6 +3,7 @@
     python -m bench.run                     # table4, built-in bounded scene, `cpu` preset
     python -m bench.run table3 --preset tiny
     python -m bench.run all --out results/
+    python -m bench.run ndrf-table3 --seeds 3   # mean ± std over seeds 0, 1, 2
     python -m bench.run --list
 
 Trains what is missing (models cached by a hash of config and data, shared across
@@ -19,7 +20,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from bench import ablation, cache, report
+from bench import ablation, cache, report, seeds
 from clrender import methods
 
 
@@ -32,23 +33,40 @@ def _git_revision() -> str:
 
 
 def run_table(table, data: Path, fingerprint: str, args, meta: dict) -> str:
-    """Train/bake what is missing, measure every row, write the table's files."""
+    """Train/bake what is missing, measure every row for each seed, write the table's files."""
     from bench.measure import measure_row
     from clrender.data import load_dataset
 
     test_set = load_dataset(data, split="test")
+    seed_list = list(range(args.seed, args.seed + args.seeds))
     results = []
-    for row in tqdm(table.rows, desc=table.key, unit="row"):
-        entry = cache.ensure_model(args.cache, data, fingerprint, args.preset or table.preset,
-                                   row.method, row.model, seed=args.seed,
-                                   torch_device=args.torch_device)
-        m = measure_row(entry.baked, test_set, row.render, device=args.device,
-                        repeats=args.repeats, timing_sizes=table.timing_sizes)
-        m.update(train_minutes=entry.train_minutes, model_key=entry.key)
-        results.append(m)
+    with tqdm(total=len(table.rows) * len(seed_list), desc=table.key, unit="model") as bar:
+        for row in table.rows:
+            per_seed = []
+            for seed in seed_list:
+                entry = cache.ensure_model(args.cache, data, fingerprint,
+                                           args.preset or table.preset, row.method, row.model,
+                                           seed=seed, torch_device=args.torch_device)
+                m = measure_row(entry.baked, test_set, row.render, device=args.device,
+                                repeats=args.repeats, timing_sizes=table.timing_sizes)
+                m.update(train_minutes=entry.train_minutes, model_key=entry.key)
+                per_seed.append(m)
+                bar.update()
+            results.append(seeds.aggregate(per_seed, seed_list))
     cam = test_set.cameras[0]
     meta = {**meta, "resolution": f"{cam.width}x{cam.height}"}
     return report.write_table(args.out, table, results, meta)
+
+
+def _seed_count(text: str) -> int:
+    """--seeds: a whole number >= 1."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number of seeds >= 1, got {text!r}")
+    return n
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -65,7 +83,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("results"))
     p.add_argument("--cache", type=Path, default=None, help="model/scene cache folder")
     p.add_argument("--repeats", type=int, default=5, help="timing passes per row")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="training seed (the first one)")
+    p.add_argument("--seeds", type=_seed_count, default=1,
+                   help="train and measure every row for seeds SEED..SEED+N-1 and report "
+                        "mean ± std (default 1)")
     return p
 
 

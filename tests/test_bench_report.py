@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from bench import ablation, report
+from bench import ablation, report, seeds
 
 
 @pytest.mark.parametrize("key", ["table2", "table3", "table4"])
@@ -105,3 +105,45 @@ def test_a_table_may_mix_methods(tmp_path):
     assert "kernels; embree + kernels" in md
     data = json.loads((tmp_path / "ndrf-teacher.json").read_text())
     assert data["rows"][1]["Marching"] is None and data["rows"][1]["Coverage"] == 0.5
+
+
+def _two_seeds(t, psnrs: dict) -> list[dict]:
+    """Per row of ``t``: the aggregate of two fake seeds with the given PSNRs."""
+    return [seeds.aggregate([{**_measured(p, 10.0 + i + s), "LPIPS": 0.2 + 0.01 * s,
+                              "stages": {"intersect": 1.0 + s}}
+                             for s, p in enumerate(psnrs[r.name])], [0, 1])
+            for i, r in enumerate(t.rows)]
+
+
+def _cells(md: str, row: str) -> list[str]:
+    line = next(l for l in md.splitlines() if l.startswith(f"| {row} |"))
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+def test_two_seeds_give_mean_spread_and_a_verdict(tmp_path):
+    t = ablation.load_table("table2")      # paper: L=3 +0.29 dB over L=2, L=4 +0.41 dB
+    results = _two_seeds(t, {"NGP-RT (L=2)": [20.0, 20.2],
+                             "NGP-RT (L=3)": [21.0, 21.4],    # +1.0, +1.2: beyond 0.2
+                             "NGP-RT (L=4)": [19.0, 19.4]})   # -1.0, -0.8: beyond 0.2
+    meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4",
+            "git_revision": "r", "date": "d"}
+    md = report.write_table(tmp_path, t, results, meta)
+    head = _cells(md, "Row")
+    assert head[11:16] == ["Speed-up", "Speed-up (paper)", "ΔPSNR vs baseline", "ΔPSNR (paper)",
+                           "Verdict"]
+    base, l3, l4 = (_cells(md, r.name) for r in t.rows)
+    assert base[1:3] == ["20.10 ± 0.14", "25.64"] and base[5:7] == ["0.205 ± 0.007", "0.299"]
+    assert base[7] == "10.5 ± 0.7" and base[13:16] == ["", "", ""]
+    assert l3[13:16] == ["+1.10 ± 0.14", "+0.29", "reproduces"]
+    assert l4[13:16] == ["-0.90 ± 0.14", "+0.41", "opposite"]
+    assert "over 2 training seeds (0, 1)" in md and "|mean Δ| > 2 × std(Δ) / √N" in md
+    data = json.loads((tmp_path / "table2.json").read_text())
+    row = data["rows"][1]
+    assert row["seeds"] == [0, 1] and [p["PSNR"] for p in row["per_seed"]] == [21.0, 21.4]
+    assert row["spread"]["PSNR"] == {"std": pytest.approx(0.4 / 2 ** 0.5), "min": 21.0,
+                                     "max": 21.4}
+    assert row["delta_PSNR"]["verdict"] == "reproduces" and data["rows"][0]["delta_PSNR"] is None
+    csv_lines = (tmp_path / "table2.csv").read_text().splitlines()
+    assert csv_lines[0].split(",")[4:8] == ["PSNR", "SSIM", "PSNR_std", "SSIM_std"]
+    assert csv_lines[2].split(",")[4:8] == ["21.2000", "0.8000", "0.2828", "0.0000"]
+

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from bench import run
@@ -48,3 +49,60 @@ def test_unknown_scene_is_a_clear_error(tmp_path, capsys):
     assert run.main(["table4", "--scene", str(tmp_path / "missing"), "--cache",
                      str(tmp_path), "--out", str(tmp_path / "out")]) == 2
     assert "neither a built-in scene" in capsys.readouterr().err
+
+
+def test_seeds_must_be_a_positive_count(capsys):
+    assert run.build_parser().parse_args(["table4", "--seeds", "3"]).seeds == 3
+    assert run.build_parser().parse_args(["table4"]).seeds == 1
+    for bad in ("0", "-1", "two"):
+        with pytest.raises(SystemExit) as exc:
+            run.build_parser().parse_args(["table4", "--seeds", bad])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert f"--seeds: expected a whole number of seeds >= 1, got '{bad}'" in err
+
+
+@pytest.fixture
+def fake_training(monkeypatch):
+    """run.main without training or rendering: every (row, seed) gets a fake model whose
+    PSNR is 20 + seed; returns the (method, seed) of every ensure_model call."""
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    import clrender.data
+    import clrender.device
+    from bench import cache, measure
+
+    calls = []
+
+    def ensure_model(root, data, fingerprint, preset, method, options, seed=0, torch_device=None):
+        calls.append((method, seed))
+        return cache.ModelEntry(f"{method}-{seed}", Path(str(seed)), root, 1.0)
+
+    def measure_row(baked, test_set, render, **kw):
+        ms = {"median": 10.0, "p10": 9.0, "p90": 11.0, "min": 9.0, "n": 4}
+        return {"PSNR": 20.0 + int(baked.name), "SSIM": 0.8, "LPIPS": None, "time": ms,
+                "wall_ms": 11.0,
+                "stages": {"intersect": 1.0}, "Coverage": 0.5, "size_MB": 1.0,
+                "time_at": {800: ms}, "sample": np.zeros((2, 2, 3), np.float32),
+                "time_note": "fake"}
+
+    cam = SimpleNamespace(width=4, height=4)
+    monkeypatch.setattr(cache, "ensure_model", ensure_model)
+    monkeypatch.setattr(cache, "resolve_scene", lambda scene, root: root)
+    monkeypatch.setattr(cache, "data_fingerprint", lambda path: "fp")
+    monkeypatch.setattr(measure, "measure_row", measure_row)
+    monkeypatch.setattr(clrender.data, "load_dataset",
+                        lambda path, split: SimpleNamespace(cameras=[cam]))
+    monkeypatch.setattr(clrender.device, "get_runtime", lambda spec: SimpleNamespace(name="fake"))
+    return calls
+
+
+def test_seeds_train_every_row_per_seed(fake_training, tmp_path):
+    common = ["--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
+    assert run.main(["ndrf-teacher", "--seed", "5", "--seeds", "2"] + common) == 0
+    assert fake_training == [("ngprt", 5), ("ngprt", 6), ("ndrf", 5), ("ndrf", 6)]
+    rows = json.loads((tmp_path / "out" / "ndrf-teacher.json").read_text())["rows"]
+    assert rows[0]["seeds"] == [5, 6] and rows[0]["PSNR"] == 25.5
+    assert [p["model_key"] for p in rows[1]["per_seed"]] == ["ndrf-5", "ndrf-6"]
+    assert "25.50 ± 0.71" in (tmp_path / "out" / "ndrf-teacher.md").read_text()
