@@ -1,4 +1,5 @@
-"""Write a measured table: Markdown (ours beside the paper's), CSV, JSON, plot, samples."""
+"""Write a measured table: Markdown (ours beside the paper's), CSV, JSON, plot, samples;
+and the index of every table written to a folder (README.md)."""
 from __future__ import annotations
 
 import csv
@@ -10,7 +11,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from bench import seeds
+from bench import ablation, seeds
 from clrender.atomic import write_atomic
 
 # Our measurement behind each paper column (None: we cannot measure it here).
@@ -275,14 +276,26 @@ def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
     return md
 
 
-def write_index(out_dir: Path, tables: list, meta: dict) -> None:
-    """results/README.md: every table with a link and one sample render per row."""
-    lines = ["# clrender benchmark results", "",
-             f"{meta['date']}, git {meta['git_revision']}, {meta['device']}, "
-             f"`{meta['preset']}` preset, {meta['scene']} scene.", ""]
-    for table in tables:
-        lines += [f"## [{table.title}]({table.key}.md)", "",
-                  f"![quality vs time]({table.key}.png)", "",
-                  " ".join(f"![{r.name}]({table.key}/{slug(r.name)}.png)" for r in table.rows),
-                  "", " | ".join(r.name for r in table.rows), ""]
+def write_index(out_dir: Path) -> None:
+    """OUT/README.md: every table with a ``OUT/<key>.json`` (in :func:`bench.ablation.list_tables`
+    order), each with the date, git revision, device, preset and scene of its own run, a link,
+    its plot and one sample render per row."""
+    lines = ["# clrender benchmark results", ""]
+    for key in ablation.list_tables():
+        path = out_dir / f"{key}.json"
+        if not path.is_file():
+            continue
+        try:
+            data = json.loads(path.read_text())
+            rows = [(r["row"], r["sample"]) for r in data["rows"]]
+            seed_list = data["rows"][0].get("seeds") or []
+            run = (f"{data['date']}, git {data['git_revision']}, {data['device']}, "
+                   f"`{data['preset']}` preset, {data['scene']} scene"
+                   + (f", {len(seed_list)} seeds" if len(seed_list) > 1 else "") + ".")
+            title = data["title"]
+        except (ValueError, KeyError, IndexError, TypeError) as exc:
+            raise ValueError(f"{path}: not a table written by bench.run ({exc!r})") from exc
+        lines += [f"## [{title}]({key}.md)", "", run, "", f"![quality vs time]({key}.png)", "",
+                  " ".join(f"![{name}]({sample})" for name, sample in rows),
+                  "", " | ".join(name for name, _ in rows), ""]
     write_atomic(out_dir / "README.md", "\n".join(lines))

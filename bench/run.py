@@ -8,7 +8,8 @@
 
 Trains what is missing (models cached by a hash of config and data, shared across
 tables), bakes, renders every test view with the OpenCL renderer and writes
-``results/TABLE.{md,csv,json,png}`` plus a sample render per row.
+``results/TABLE.{md,csv,json,png}`` plus a sample render per row, then
+``results/README.md`` listing every table found there.
 """
 from __future__ import annotations
 
@@ -111,8 +112,7 @@ def main(argv=None) -> int:
             fingerprint = cache.data_fingerprint(data)
             meta.update(preset=args.preset or table.preset, scene=scene)
             print(run_table(table, data, fingerprint, args, meta))
-        if args.table == "all":
-            report.write_index(args.out, tables, meta)
+        report.write_index(args.out)
         print(f"results written to {args.out}/")
     except ValueError as exc:
         print(f"bench.run: error: {exc}", file=sys.stderr)

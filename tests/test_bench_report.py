@@ -46,7 +46,7 @@ def test_write_table_puts_paper_figures_beside_ours(tmp_path):
     assert (tmp_path / "table4.csv").read_text().count("\n") == 7
     assert (tmp_path / "table4.png").stat().st_size > 1000
     assert (tmp_path / "table4" / "l-2-w-o-g.png").is_file()
-    report.write_index(tmp_path, [t], meta)
+    report.write_index(tmp_path)
     assert "table4/l-2-w-g.png" in (tmp_path / "README.md").read_text()
 
 
@@ -147,3 +147,26 @@ def test_two_seeds_give_mean_spread_and_a_verdict(tmp_path):
     assert csv_lines[0].split(",")[4:8] == ["PSNR", "SSIM", "PSNR_std", "SSIM_std"]
     assert csv_lines[2].split(",")[4:8] == ["21.2000", "0.8000", "0.2828", "0.0000"]
 
+
+def test_index_lists_every_table_written_with_its_own_run(tmp_path):
+    t3 = ablation.load_table("ndrf-table3")
+    single = ablation.load_table("ndrf-thresholds")
+    meta = {"device": "dev A", "preset": "cpu", "scene": "builtin-bounded", "resolution": "4x4",
+            "git_revision": "r1", "date": "2026-01-01"}
+    measured = {**_measured(21.0, 20.0), "stages": {"intersect": 1.0}}
+    report.write_table(tmp_path, single, [measured] * len(single.rows), meta)
+    report.write_index(tmp_path)
+    text = (tmp_path / "README.md").read_text()
+    assert "(ndrf-thresholds.md)" in text and "ndrf-table3" not in text
+    report.write_table(tmp_path, t3, _two_seeds(t3, {r.name: [20.0, 21.0] for r in t3.rows}),
+                       {**meta, "device": "dev B", "git_revision": "r2", "preset": "tiny"})
+    (tmp_path / "not-a-table.json").write_text("{}")
+    report.write_index(tmp_path)
+    text = (tmp_path / "README.md").read_text()
+    first, second = text.index("## [NDRF Table 3"), text.index("## [NDRF supp. Table 2")
+    assert first < second                              # ablation.list_tables() order
+    assert "2026-01-01, git r2, dev B, `tiny` preset, builtin-bounded scene, 2 seeds." \
+        in text[first:second]
+    assert "2026-01-01, git r1, dev A, `cpu` preset, builtin-bounded scene." in text[second:]
+    assert "![Duplex (1e-4, 1e-2)](ndrf-thresholds/duplex-1e-4-1e-2.png)" in text
+    assert "not-a-table" not in text

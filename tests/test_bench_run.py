@@ -98,7 +98,7 @@ def fake_training(monkeypatch):
     return calls
 
 
-def test_seeds_train_every_row_per_seed(fake_training, tmp_path):
+def test_seeds_train_every_row_per_seed_and_the_index_lists_each_table(fake_training, tmp_path):
     common = ["--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
     assert run.main(["ndrf-teacher", "--seed", "5", "--seeds", "2"] + common) == 0
     assert fake_training == [("ngprt", 5), ("ngprt", 6), ("ndrf", 5), ("ndrf", 6)]
@@ -106,3 +106,6 @@ def test_seeds_train_every_row_per_seed(fake_training, tmp_path):
     assert rows[0]["seeds"] == [5, 6] and rows[0]["PSNR"] == 25.5
     assert [p["model_key"] for p in rows[1]["per_seed"]] == ["ndrf-5", "ndrf-6"]
     assert "25.50 ± 0.71" in (tmp_path / "out" / "ndrf-teacher.md").read_text()
+    assert run.main(["ndrf-layers"] + common) == 0             # one seed, another run
+    index = (tmp_path / "out" / "README.md").read_text()
+    assert "(ndrf-layers.md)" in index and "(ndrf-teacher.md)" in index
