@@ -53,7 +53,8 @@ def eval_steps(iterations: int, log_every: int, n_points: int = N_POINTS) -> lis
 
 class Evaluator:
     """The ``on_step`` hook of NGP-RT training: at the chosen steps, bake the training
-    state and evaluate it on the test views; the training clock pauses meanwhile.
+    state and evaluate it on the test views; the training clock, started when the hook is
+    made (just before training), pauses meanwhile.
 
     Args:
         steps: iterations to evaluate after (see :func:`eval_steps`).
@@ -68,11 +69,7 @@ class Evaluator:
     def __init__(self, steps, train_set, test_set, render_options: dict, device=None):
         self.steps, self.train_set, self.test_set = set(steps), train_set, test_set
         self.render_options, self.device = dict(render_options), device
-        self.points, self.train_seconds, self._resumed = [], 0.0, None
-
-    def start(self) -> None:
-        """Start the training clock (just before training starts)."""
-        self._resumed = time.perf_counter()
+        self.points, self.train_seconds, self._resumed = [], 0.0, time.perf_counter()
 
     def __call__(self, step, model, occ, gamma) -> None:
         if step not in self.steps:
@@ -127,7 +124,6 @@ def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: i
     shutil.rmtree(run_dir, ignore_errors=True)
     hook = Evaluator(steps, load_dataset(data, split="train"), load_dataset(data, split="test"),
                      row.render, device)
-    hook.start()
     train(str(data), run_dir, preset=preset, iterations=tcfg.iterations, seed=seed,
           device=torch_device, progress=progress, on_step=hook, **row.model)
     logged = {rec["step"]: rec["psnr"] for rec in map(json.loads, (run_dir / "log.jsonl")
