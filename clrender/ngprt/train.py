@@ -237,11 +237,13 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
 
     Args:
         on_step: called as ``on_step(step, model, occ, gamma)`` after every iteration
-            ``step`` (0-based; its optimiser step, gamma update, log line and checkpoint
-            done), with the :class:`NGPRT` in training, its :class:`OccupancyGrid` and the
-            step scaler gamma. It must leave them and the torch RNG as it found them
-            (``bench/train_curve.py`` bakes and evaluates there).
-    Returns the run folder.
+            ``step`` (0-based, as ``log.jsonl``: its optimiser step and gamma update
+            done, its log line and checkpoint written where due), with the :class:`NGPRT`
+            in training, its :class:`OccupancyGrid` and the step scaler gamma. It must
+            leave them and the torch RNG as it found them (``bench/train_curve.py`` bakes
+            and evaluates there).
+    Returns:
+        the run folder.
     """
     dev, out = pick_device(device), Path(out)
     out.mkdir(parents=True, exist_ok=True)
