@@ -145,8 +145,8 @@ def _plot(points: list[dict], meta: dict) -> bytes:
                 marker="o", label=f"{preset} (seed {pts[0]['seed']})")
     ax.set_xlabel("training wall-clock (min, evaluations excluded)")
     ax.set_ylabel("test PSNR (dB), baked model, OpenCL")
-    ax.set_title(f"NGP-RT L=2 separate-v, {meta['scene']}\n{meta['device']}, git "
-                 f"{meta['git_revision']}, {meta['date']}", fontsize=9)
+    ax.set_title(f"NGP-RT L=2 separate-v, {meta['scene']}, git {meta['git_revision']}, "
+                 f"{meta['date'][:10]}\n{meta['device']}", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
