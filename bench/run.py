@@ -5,11 +5,13 @@
     python -m bench.run all --out results/
     python -m bench.run ndrf-table3 --seeds 3   # mean ± std over seeds 0, 1, 2
     python -m bench.run --list
+    python -m bench.run train-curve         # test PSNR vs training minutes, `cpu` and `tiny`
 
 Trains what is missing (models cached by a hash of config and data, shared across
 tables), bakes, renders every test view with the OpenCL renderer and writes
 ``results/TABLE.{md,csv,json,png}`` plus a sample render per row, then
-``results/README.md`` listing every table found there.
+``results/README.md`` listing every table found there. ``train-curve``
+(bench/train_curve.py) writes ``results/train-curve.{csv,png}``.
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from bench import ablation, cache, report, seeds
+from bench import ablation, cache, report, seeds, train_curve
 from clrender import methods
 
 
@@ -73,10 +75,13 @@ def _seed_count(text: str) -> int:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m bench.run", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("table", nargs="?", default="table4", help="a table name, or `all`")
+    p.add_argument("table", nargs="?", default="table4",
+                   help=f"a table name, `all`, or `{train_curve.KEY}`")
     p.add_argument("--list", action="store_true", help="list the tables and exit")
-    p.add_argument("--preset", choices=methods.all_presets(), default=None,
-                   help="model/training preset (default: the table's, `cpu`)")
+    p.add_argument("--preset", choices=methods.all_presets(), action="append", default=None,
+                   help="model/training preset (default: the table's, `cpu`); "
+                        f"{train_curve.KEY} takes it more than once "
+                        f"(default: {' and '.join(train_curve.PRESETS)})")
     p.add_argument("--scene", default=None,
                    help="builtin-bounded | builtin-unbounded | a dataset folder (default: the table's)")
     p.add_argument("--device", default=None, help="OpenCL device spec (see `clrender info`)")
@@ -97,15 +102,22 @@ def main(argv=None) -> int:
         for key in ablation.list_tables():
             t = ablation.load_table(key)
             print(f"{key:16s} {t.title} ({len(t.rows)} rows)")
+        print(f"{train_curve.KEY:16s} {train_curve.TITLE} (not in `all`)")
         return 0
     try:
-        keys = ablation.list_tables() if args.table == "all" else [args.table]
+        curve = args.table == train_curve.KEY
+        keys = [] if curve else ablation.list_tables() if args.table == "all" else [args.table]
         tables = [ablation.load_table(k) for k in keys]
+        if not curve and len(args.preset or ()) > 1:
+            raise ValueError(f"a table takes one --preset, got {', '.join(args.preset)}")
+        args.preset = args.preset if curve else (args.preset or [None])[0]
         args.cache = args.cache or cache.cache_root()
         from clrender.device import get_runtime
 
         meta = {"device": get_runtime(args.device).name, "git_revision": _git_revision(),
                 "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+        if curve:
+            print(train_curve.run(args, meta))
         for table in tables:
             scene = args.scene or table.scene
             data = cache.resolve_scene(scene, args.cache)

@@ -7,6 +7,7 @@ weights are copied as they are.
 
 Examples:
     >>> bake_run("/tmp/run_b", "/tmp/model_b.npz")
+    >>> baked = bake_state(model, occ.binary, gamma, train_set)   # mid-training, in memory
 
 References: NGP-RT (Hu et al., ECCV 2024) §4.1, S2.5; MERF (Reiser et al. 2023) §5.
 """
@@ -106,6 +107,16 @@ def bake(model: NGPRT, occupancy_0: np.ndarray, gamma: float):
     return BakedModel(cfg, float(gamma), arrays)
 
 
+def bake_state(model: NGPRT, occupancy: torch.Tensor, gamma: float, dataset,
+               n_rays: int = CULL_RAYS):
+    """A :class:`clrender.ngprt.baked.BakedModel` of an in-memory training state (what
+    :func:`bake_run` bakes from a checkpoint): visibility culling of the training
+    ``occupancy`` ((L_C,)*3 bool) on ``n_rays`` rays of ``dataset`` (the training Dataset),
+    then :func:`bake`. Works on a model in training; changes neither it nor the torch RNG."""
+    occupancy_0 = visible_cells(model, occupancy, gamma, dataset, n_rays=n_rays)
+    return bake(model, occupancy_0, gamma)
+
+
 def bake_run(run_dir, out_path, dataset=None, device=None, n_rays: int = CULL_RAYS) -> Path:
     """Bake the checkpoint of ``run_dir`` into ``out_path`` (written atomically).
 
@@ -123,8 +134,7 @@ def bake_run(run_dir, out_path, dataset=None, device=None, n_rays: int = CULL_RA
             raise ValueError(f"{run_dir}/config.json: no data path; pass the dataset")
         from ..data import load_dataset
         dataset = load_dataset(conf["data"], split="train")
-    occupancy_0 = visible_cells(model, occ, gamma, dataset, n_rays=n_rays)
-    baked = bake(model, occupancy_0, gamma)
+    baked = bake_state(model, occ, gamma, dataset, n_rays=n_rays)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     save_baked(baked, out_path)

@@ -228,12 +228,22 @@ def load_run(run_dir, device=None):
 
 def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 2,
           iterations: int | None = None, seed: int = 0, device=None,
-          train_config: TrainConfig | None = None, progress: bool = True) -> Path:
+          train_config: TrainConfig | None = None, progress: bool = True,
+          on_step=None) -> Path:
     """Train an NGP-RT model on the dataset folder ``data`` (or a loaded Dataset) into the
     run folder ``out``.
 
     An existing checkpoint in ``out`` with the same config is resumed.
-    Returns the run folder.
+
+    Args:
+        on_step: called as ``on_step(step, model, occ, gamma)`` after every iteration
+            ``step`` (0-based, as ``log.jsonl``: its optimiser step and gamma update
+            done, its log line and checkpoint written where due), with the :class:`NGPRT`
+            in training, its :class:`OccupancyGrid` and the step scaler gamma. It must
+            leave them and the torch RNG as it found them (``bench/train_curve.py`` bakes
+            and evaluates there).
+    Returns:
+        the run folder.
     """
     dev, out = pick_device(device), Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -262,11 +272,12 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
         occ.ema, occ.binary = state["occ_ema"].to(dev), state["occ_binary"].to(dev)
         gamma, start = float(state["gamma"]), int(state["step"])
     (out / "config.json").write_text(json.dumps(conf, indent=2))
-    _loop(model, opt, occ, gamma, start, RaySampler(ds, dev, getattr(ds, "alpha", None)), tcfg, out, progress)
+    _loop(model, opt, occ, gamma, start, RaySampler(ds, dev, getattr(ds, "alpha", None)), tcfg, out, progress,
+          on_step)
     return out
 
 
-def _loop(model, opt, occ, gamma, start, sampler, tcfg, out, progress):
+def _loop(model, opt, occ, gamma, start, sampler, tcfg, out, progress, on_step=None):
     from tqdm import tqdm
 
     n_rays, t0 = min(tcfg.max_rays, 1024), time.time()
@@ -308,3 +319,5 @@ def _loop(model, opt, occ, gamma, start, sampler, tcfg, out, progress):
                 log.flush()
             if (step + 1) % tcfg.checkpoint_every == 0 or step == tcfg.iterations - 1:
                 save_checkpoint(out / "checkpoint.pt", model, opt, occ, gamma, step + 1)
+            if on_step is not None:
+                on_step(step, model, occ, gamma)

@@ -1,0 +1,87 @@
+"""`python -m bench.run train-curve`: the command line, the evaluation steps, the files, and
+(slow) a short `tiny` curve on a small scene, whose last point is the model the tables would
+bake and whose training is the one a run without evaluations gives."""
+from __future__ import annotations
+
+import csv
+
+import pytest
+
+from bench import run, train_curve
+
+
+def test_argparse_accepts_train_curve_and_repeated_presets(tmp_path, capsys):
+    args = run.build_parser().parse_args(["train-curve", "--preset", "cpu", "--preset", "tiny"])
+    assert args.table == "train-curve" and args.preset == ["cpu", "tiny"]
+    assert run.main(["table4", "--preset", "cpu", "--preset", "tiny", "--cache",
+                     str(tmp_path)]) == 2
+    assert "a table takes one --preset" in capsys.readouterr().err
+    assert run.main(["--list"]) == 0
+    assert "train-curve" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("iterations, log_every", [(1800, 25), (300, 10), (30, 10), (1, 10)])
+def test_eval_steps_span_the_run_on_logged_steps(iterations, log_every):
+    steps = train_curve.eval_steps(iterations, log_every)
+    assert steps[0] == 0 and steps[-1] == iterations - 1 and steps == sorted(set(steps))
+    assert all(s % log_every == 0 for s in steps[:-1]) and len(steps) <= train_curve.N_POINTS
+    if iterations >= 300:
+        assert len(steps) >= 10
+
+
+def test_run_writes_every_preset_to_one_csv_and_png(tmp_path, monkeypatch, capsys):
+    """The command's plumbing, training replaced by a stand-in: presets in the order given,
+    one CSV and one PNG for all of them."""
+    def fake_curve(root, data, fingerprint, preset, seed=0, **kwargs):
+        return [{"preset": preset, "seed": seed, "step": s, "train_seconds": 10.0 * s,
+                 "eval_seconds": 1.0, "test_psnr": 10.0 + s, "test_ssim": 0.5,
+                 "train_psnr": None if s else 12.0} for s in (0, 1, 2)]
+
+    monkeypatch.setattr(train_curve, "measure_curve", fake_curve)
+    (tmp_path / "scene").mkdir()
+    out = tmp_path / "out"
+    assert run.main(["train-curve", "--preset", "tiny", "--preset", "cpu", "--seed", "3",
+                     "--scene", str(tmp_path / "scene"), "--cache", str(tmp_path / "cache"),
+                     "--out", str(out)]) == 0
+    rows = list(csv.DictReader((out / "train-curve.csv").open()))
+    assert [(r["preset"], r["seed"], r["step"]) for r in rows] == \
+        [(p, "3", s) for p in ("tiny", "cpu") for s in "012"]
+    assert rows[1]["train_psnr"] == "" and rows[0]["train_psnr"] == "12.0000"
+    assert (out / "train-curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "test PSNR" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_tiny_curve_measures_the_deployed_model_without_changing_training(tmp_path):
+    """A short `tiny` run on a small scene: the CSV and PNG, the training clock, the last
+    point equal to the run's checkpoint baked and evaluated as the tables do it, and the
+    training equal to one without evaluations (tolerance as in test_train.py; the run is
+    kept short since CPU rounding differences grow over the steps)."""
+    import torch
+
+    from clrender.data import make_scene
+    from clrender.evaluate import evaluate
+    from clrender.ngprt.bake import bake_run
+    from clrender.ngprt.train import train
+
+    scene = make_scene("bounded", tmp_path / "scene", seed=1, n_train=10, n_test=2, width=32,
+                       height=32)
+    cache = tmp_path / "cache"
+    points = train_curve.measure_curve(cache, scene, "fingerprint", "tiny", iterations=20,
+                                       progress=False)
+    meta = {"scene": "small", "device": "cpu", "git_revision": "test", "date": "today"}
+    train_curve.write_curve(tmp_path / "out", points, meta)
+    rows = list(csv.DictReader((tmp_path / "out" / "train-curve.csv").open()))
+    assert tuple(rows[0]) == train_curve.COLUMNS
+    assert [int(r["step"]) for r in rows] == train_curve.eval_steps(20, 10) == [0, 10, 19]
+    seconds = [float(r["train_seconds"]) for r in rows]
+    assert seconds == sorted(seconds) and seconds[0] > 0
+    assert all(float(r["eval_seconds"]) > 0 and r["train_psnr"] for r in rows)
+    assert all(5.0 < float(r["test_psnr"]) < 60.0 for r in rows)
+    assert (tmp_path / "out" / "train-curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    (run_dir,) = (cache / "curves").glob("*/run")
+    tables = evaluate(bake_run(run_dir, tmp_path / "model.npz"), scene, use_G=True)
+    assert points[-1]["test_psnr"] == pytest.approx(tables["mean"]["psnr"], abs=1e-6)
+    plain = train(scene, tmp_path / "plain", preset="tiny", iterations=20, progress=False)
+    curve, plain = (torch.load(d / "checkpoint.pt", weights_only=True) for d in (run_dir, plain))
+    torch.testing.assert_close(curve["model"], plain["model"], rtol=0, atol=1e-5)
