@@ -86,8 +86,9 @@ class TrainConfig:
 # 1e-3; at 200x200, 3e-2 gave no more than 1e-2).
 TRAIN_PRESETS: dict[str, TrainConfig] = {
     "paper": TrainConfig(),
-    # Full 200x200 frames (~55 ms a step on 2 cores); 200k faces per mesh measured no
-    # better than 60k at this resolution and step count, at twice the time per step.
+    # Full 200x200 frames (~22 ms a step, ~2 min a duplex run with extraction, on 2 quiet
+    # cores); 200k faces per mesh measured no better than 60k at this resolution and step
+    # count, at twice the time per step.
     "cpu": TrainConfig(iterations=5000, n_distill=200, patch=0, lr=1e-2, lr_final=1e-4,
                        extract="cpu", face_budget=60_000, checkpoint_every=500, log_every=25),
     # CI: the whole run, extraction included, in well under a minute on 2 cores.
