@@ -24,8 +24,13 @@
 #define CLRENDER_NGPRT_COMMON_H
 #pragma OPENCL FP_CONTRACT OFF
 
-#if !defined(T_STOP) || !defined(N_MIP) || !defined(FEATURES) || !defined(FUSION_HIDDEN)
-#error "ngprt kernels need -D T_STOP N_MIP FEATURES FUSION_HIDDEN (config.kernel_constants)"
+#if !defined(T_STOP) || !defined(N_MIP) || !defined(FEATURES) || !defined(FUSION_HIDDEN) || \
+    !defined(LATTICE_BREAKS)
+#error "ngprt kernels need -D T_STOP N_MIP FEATURES FUSION_HIDDEN LATTICE_BREAKS (config.kernel_constants)"
+#endif
+/* The lattice table holds the ray's start, 12 candidates and its end (ngp_lattice_build). */
+#if LATTICE_BREAKS != 14
+#error "LATTICE_BREAKS must be 14: the start, 12 candidate breakpoints, the end"
 #endif
 #if !defined(VARIANT_SUM) || !defined(VARIANT_MLP) || !defined(VARIANT_SHARED_INV) || \
     !defined(VARIANT_SEPARATE_INV) || !defined(VARIANT_SHARED_V) || !defined(VARIANT_SEPARATE_V)
@@ -106,24 +111,95 @@ inline float3 ngp_contract(float3 x)
                     ax.z == m ? scaled.z : s.z);
 }
 
-/* Warped distance g(t) and its inverse (space.warp / space.unwarp). */
-inline float ngp_warp(float t)
-{
 #if UNBOUNDED
-    return t <= 1.0f ? t : 2.0f - 1.0f / ngp_maxf(t, 1.0f);
-#else
-    return t;
-#endif
+/* The unbounded step lattice (space.lattice_table, docs/ngprt.md "Step lattice"): the
+ * contracted arc length S(t) from the ray's start, in closed form on the pieces between
+ * LATTICE_BREAKS sorted breakpoints; lattice point k sits at t_k = S^-1(k * s). */
+typedef struct {
+    float brk[LATTICE_BREAKS], cum[LATTICE_BREAKS];
+    float A[LATTICE_BREAKS - 1], B[LATTICE_BREAKS - 1], K[LATTICE_BREAKS - 1];
+} ngp_lattice;
+
+/* A candidate breakpoint: c where t_start < c < t_end, else t_end. */
+inline float ngp_cand(float c, float t0, float t1)
+{
+    return (c > t0 && c < t1) ? c : t1;
 }
 
-inline float ngp_unwarp(float g)
+inline void ngp_lattice_build(float3 o3, float3 d3, float t0, float t1, ngp_lattice *lt)
 {
-#if UNBOUNDED
-    return g <= 1.0f ? g : 1.0f / (2.0f - ngp_maxf(g, 1.0f));
-#else
-    return g;
-#endif
+    const float o[3] = {o3.x, o3.y, o3.z}, d[3] = {d3.x, d3.y, d3.z};
+    float c[12];
+    int n = 0;
+    for (int i = 0; i < 2; ++i)
+        for (int j = i + 1; j < 3; ++j) {
+            c[n++] = ngp_cand((o[j] - o[i]) / (d[i] - d[j]), t0, t1);
+            c[n++] = ngp_cand(-(o[i] + o[j]) / (d[i] + d[j]), t0, t1);
+        }
+    for (int i = 0; i < 3; ++i) {
+        c[n++] = ngp_cand((1.0f - o[i]) / d[i], t0, t1);
+        c[n++] = ngp_cand((-1.0f - o[i]) / d[i], t0, t1);
+    }
+    for (int i = 1; i < 12; ++i) {          /* insertion sort: the values, as np.sort */
+        const float v = c[i];
+        int j = i - 1;
+        while (j >= 0 && c[j] > v) { c[j + 1] = c[j]; --j; }
+        c[j + 1] = v;
+    }
+    lt->brk[0] = t0;
+    for (int i = 0; i < 12; ++i) lt->brk[i + 1] = c[i];
+    lt->brk[LATTICE_BREAKS - 1] = t1;
+    lt->cum[0] = 0.0f;
+    for (int q = 0; q < LATTICE_BREAKS - 1; ++q) {
+        const float ta = lt->brk[q], tb = lt->brk[q + 1];
+        const float tm = ta + (tb - ta) * 0.5f;
+        const float xm[3] = {o[0] + tm * d[0], o[1] + tm * d[1], o[2] + tm * d[2]};
+        const float ax = ngp_absf(xm[0]), ay = ngp_absf(xm[1]), az = ngp_absf(xm[2]);
+        const float mm = ngp_maxf(ngp_maxf(ax, ay), az);
+        const int a = ax == mm ? 0 : (ay == mm ? 1 : 2);
+        const float sg = xm[a] > 0.0f ? 1.0f : -1.0f;
+        const float p[3] = {o[0] + ta * d[0], o[1] + ta * d[1], o[2] + ta * d[2]};
+        const float ma = sg * p[a], b = sg * d[a];
+        const float e0 = d[0] * ma - p[0] * b, e1 = d[1] * ma - p[1] * b, e2 = d[2] * ma - p[2] * b;
+        const float K = sqrt(e0 * e0 + e1 * e1 + e2 * e2 + b * b);
+        const bool inner = mm <= 1.0f;
+        lt->A[q] = inner ? 1.0f : ma * ma;
+        lt->B[q] = inner ? 0.0f : ma * b;
+        lt->K[q] = inner ? 1.0f : K;
+        const float tau = tb - ta;
+        lt->cum[q + 1] = lt->cum[q] + lt->K[q] * tau / (lt->A[q] + lt->B[q] * tau);
+    }
 }
+
+/* S(t_end): the lattice runs while k * s is below it. */
+inline float ngp_lattice_end(const ngp_lattice *lt)
+{
+    return lt->cum[LATTICE_BREAKS - 1];
+}
+
+/* S^-1(sigma) for 0 <= sigma < S(t_end) (space.lattice_t). */
+inline float ngp_lattice_t(const ngp_lattice *lt, float sigma)
+{
+    int j = 0;
+    for (int q = 1; q < LATTICE_BREAKS - 1; ++q) j = lt->cum[q] <= sigma ? q : j;
+    const float r = sigma - lt->cum[j];
+    const float den = lt->K[j] - lt->B[j] * r;
+    const float tb = lt->brk[j + 1];
+    return den > 0.0f ? ngp_minf(lt->brk[j] + lt->A[j] * r / den, tb) : tb;
+}
+
+/* S(t) for t >= t_start, clamped to t_end (space.lattice_s). */
+inline float ngp_lattice_s(const ngp_lattice *lt, float t)
+{
+    t = ngp_minf(t, lt->brk[LATTICE_BREAKS - 1]);
+    int j = 0;
+    for (int q = 1; q < LATTICE_BREAKS - 1; ++q) j = lt->brk[q] <= t ? q : j;
+    const float tau = t - lt->brk[j];
+    return lt->cum[j] + lt->K[j] * tau / (lt->A[j] + lt->B[j] * tau);
+}
+#else
+typedef struct { int unused; } ngp_lattice;   /* bounded: t_k = k * s, no table */
+#endif
 
 /* Grid coordinates u in [0, 1]^3 of a world point (space.to_grid). */
 inline float3 ngp_to_grid(float3 p)
@@ -337,25 +413,15 @@ inline vpoint v_ray_dir(__global const float *cam, vint px, int py)
     return d;
 }
 
-inline vfloat v_warp(vfloat t)
-{
 #if UNBOUNDED
-    return select(2.0f - 1.0f / v_max(t, 1.0f), t, VMASK(t <= 1.0f));
-#else
+/* ngp_lattice_t per lane (lt: one lattice per lane). */
+inline vfloat v_lattice_t(const ngp_lattice *lt, vfloat sigma)
+{
+    vfloat t;
+    FOR_LANES(j) LANE_F(t, j) = ngp_lattice_t(&lt[j], LANE_F(sigma, j));
     return t;
-#endif
 }
 
-inline vfloat v_unwarp(vfloat g)
-{
-#if UNBOUNDED
-    return select(1.0f / (2.0f - v_max(g, 1.0f)), g, VMASK(g <= 1.0f));
-#else
-    return g;
-#endif
-}
-
-#if UNBOUNDED
 /* ngp_contract per lane. */
 inline vpoint v_contract(vpoint x)
 {

@@ -109,11 +109,20 @@ class OccupancyGrid:
         self.binary = torch.ones((self.R,) * 3, dtype=torch.bool, device=device)
 
     def _step_scale(self, u: torch.Tensor) -> torch.Tensor:
-        """World length of a unit of warped distance at u (1 inside the unit ball/box)."""
+        """Largest world length of a unit of lattice distance at u, over directions (1
+        inside the unit cube). The unbounded lattice is uniform in contracted space
+        (docs/ngprt.md "Step lattice"); outside the cube, with ``m = |x|_inf`` and ``c_b``
+        the other two contracted coordinates, a contracted step dc is longest in world
+        space along the ray through the origin: ``|dx| = m^2 sqrt(1 + c_b^2 + c_b'^2) |dc|``,
+        ``m = 1 / (2 - |c|_inf)``."""
         if self.cfg.scene == "bounded":
             return torch.ones_like(u[:, 0])
-        m = (u * 2 * self.cfg.extent - self.cfg.extent).abs().amax(-1)
-        return torch.clamp(1.0 / torch.clamp(2.0 - m, min=1e-2) ** 2, max=1e4)
+        c = u * 2 * self.cfg.extent - self.cfg.extent
+        mc = c.abs().amax(-1)
+        m = 1.0 / torch.clamp(2.0 - mc, min=1e-2)
+        rest = torch.clamp((c * c).sum(-1) - mc * mc, min=0.0)
+        scale = m * m * torch.sqrt(1.0 + rest)
+        return torch.where(mc <= 1.0, torch.ones_like(mc), torch.clamp(scale, max=1e4))
 
     @torch.no_grad()
     def update(self, model: NGPRT, step: int, warmup: int, fraction: float, decay: float,
