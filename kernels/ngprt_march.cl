@@ -68,7 +68,7 @@ inline int ngp_first_outside(int k_in, int k_out, float s, float3 o, float3 d, i
  * render_ref.skip_bounded. */
 inline vint v_skip(vint k, vfloat t, float3 o, vpoint d, vpoint u, vcell c0, vint empty,
                    vint lev, vint g_code, float s, vfloat g_end, __global const uchar *G,
-                   const ngp_lattice *lt)
+                   const v_lattice *lt)
 {
     const vint res = (vint)(L_C) >> lev;
     /* 2 / res: L_C >> lev = L_C / 2^lev exactly, and scaling by 2^lev is exact. */
@@ -178,7 +178,7 @@ inline float3 ngp_lane3(vfloat x, vfloat y, vfloat z, int j)
  * render_ref.skip_unbounded. */
 inline vint v_skip(vint k, vfloat t, float3 o, vpoint d, vpoint u, vcell c0, vint empty,
                    vint lev, vint g_code, float s, vfloat g_end, __global const uchar *G,
-                   const ngp_lattice *lt)
+                   const v_lattice *lt)
 {
     const vint res = (vint)(L_C) >> lev;
     vcell cell;
@@ -193,7 +193,9 @@ inline vint v_skip(vint k, vfloat t, float3 o, vpoint d, vpoint u, vcell c0, vin
     const vint cube = VMASK(g > 0) & VMASK(half_side > 0.0f);
     const vfloat lim = g_end / s + 2.0f;
     vint walking = empty;
+    vfloat tk = v_lattice_t(lt, VF(k) * s);
     while (any(walking)) {
+        vfloat T = tk;
         FOR_LANES(j) {
             if (!LANE_I(walking, j)) continue;
             const float sz = LANE_F(size, j), mg = LANE_F(margin, j), hf = LANE_F(half_side, j);
@@ -201,14 +203,15 @@ inline vint v_skip(vint k, vfloat t, float3 o, vpoint d, vpoint u, vcell c0, vin
                                       (float)LANE_I(cell.z, j));
             const float3 dj = ngp_lane3(d.x, d.y, d.z, j);
             const float3 cj = ngp_lane3(u.x, u.y, u.z, j) * 4.0f - 2.0f;
-            const int kj = LANE_I(k, j);
-            const float tj = ngp_lattice_t(&lt[j], (float)kj * s);
-            float T = ngp_box_exit(o, dj, tj, i * sz - 2.0f + mg, (i + 1.0f) * sz - 2.0f - mg);
-            if (LANE_I(cube, j)) T = ngp_maxf(T, ngp_box_exit(o, dj, tj, cj - hf, cj + hf));
-            LANE_I(k, j) = max(kj + 1, ngp_ceil_i(ngp_minf(ngp_lattice_s(&lt[j], T) / s - 1e-3f,
-                                                             LANE_F(lim, j))));
+            const float tj = LANE_F(tk, j);
+            float Tj = ngp_box_exit(o, dj, tj, i * sz - 2.0f + mg, (i + 1.0f) * sz - 2.0f - mg);
+            if (LANE_I(cube, j)) Tj = ngp_maxf(Tj, ngp_box_exit(o, dj, tj, cj - hf, cj + hf));
+            LANE_F(T, j) = Tj;
         }
-        const vpoint uk = v_point_u(o, d, v_lattice_t(lt, VF(k) * s));
+        const vint jump = v_ceil_i(v_min(v_lattice_s(lt, T) / s - 1e-3f, lim));
+        k = select(k, max(k + 1, jump), walking);
+        tk = v_lattice_t(lt, VF(k) * s);
+        const vpoint uk = v_point_u(o, d, tk);
         const vfloat dx = uk.x - u.x, dy = uk.y - u.y, dz = uk.z - u.z;
         const vint stay = v_same_cell(v_cell(uk, res), cell)
                           | (VMASK(g > 0) & VMASK(sqrt(dx * dx + dy * dy + dz * dz) < radius));
@@ -308,7 +311,7 @@ inline float8 ngp_lane_features(int j, const vint *idx, const vfloat *wt,
  * index k) into acc (per lane), *T, *opacity, *depth_acc (render_ref.composite): the
  * features lane by lane, density and alpha for all lanes at once (two vector exps). */
 inline void v_composite(vint sample, vint k, vfloat t, vpoint u, vcell c0, float s,
-                        vfloat g_end, const ngp_lattice *lt, float far,
+                        vfloat g_end, const v_lattice *lt, float far,
                         __global const int *block_index,
                         __global const float8 *blocks, int n_blocks,
                         __global const float8 *tables, __global const float *fusion,
@@ -352,13 +355,11 @@ inline void v_composite(vint sample, vint k, vfloat t, vpoint u, vcell c0, float
  * (0 where missed: ceil() of inf never reaches an int); unbounded S(far) and 0, the
  * lattice of each lane built into lt. */
 inline vint v_ray_start(float3 o, vpoint d, float near, float far, float s, vfloat *g_end,
-                        vint *k, ngp_lattice *lt)
+                        vint *k, v_lattice *lt)
 {
 #if UNBOUNDED
-    FOR_LANES(j) {
-        ngp_lattice_build(o, ngp_lane3(d.x, d.y, d.z, j), near, far, &lt[j]);
-        LANE_F(*g_end, j) = ngp_lattice_end(&lt[j]);
-    }
+    v_lattice_build(o, d, near, far, lt);
+    *g_end = lt->cum[LATTICE_BREAKS - 1];
     *k = (vint)(0);
     return (vint)(-1);
 #else
@@ -408,8 +409,9 @@ __kernel void ngprt_march(__global const float *cam, const int width, const int 
     const vpoint d = v_ray_dir(cam, px, py);
     vfloat g_end;
     vint k;
-    ngp_lattice lt[RAYS];
-    const vint hit = v_ray_start(o, d, near, far, s, &g_end, &k, lt) & VMASK(px < width);
+    v_lattice lattice;
+    const v_lattice *lt = &lattice;
+    const vint hit = v_ray_start(o, d, near, far, s, &g_end, &k, &lattice) & VMASK(px < width);
     k = select((vint)(0), k, hit);
     vint n_march = (vint)(0), n_occ = (vint)(0);
     vfloat T = (vfloat)(1.0f), opacity = (vfloat)(0.0f), depth_acc = (vfloat)(0.0f);

@@ -67,7 +67,7 @@ def _oclgrind(script: str) -> tuple[subprocess.CompletedProcess, str, list[str]]
                PYTHONPATH=os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]))
     proc = subprocess.run(
         ["oclgrind", "--check-api", "--data-races", "--uninitialized", sys.executable, "-c",
-         script], capture_output=True, text=True, env=env, cwd=root, timeout=300)
+         script], capture_output=True, text=True, env=env, cwd=root, timeout=900)
     log = proc.stdout + proc.stderr
     blocks = [b for b in re.split(r"\n\s*\n", log)
               if not ("clGetDeviceInfo" in b and "CL_INVALID_VALUE" in b and "param_name" in b)]
