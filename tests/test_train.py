@@ -153,15 +153,30 @@ def test_composite_matches_sequential_loop():
         np.testing.assert_allclose(w[ids == r].numpy(), ref, rtol=1e-5, atol=1e-7)
 
 
-def test_distortion_loss_matches_pairwise_sum():
-    """Eq. S2 summed over all pairs, on lattice intervals [k*s, (k+1)*s]."""
+@pytest.mark.parametrize("unbounded", [False, True])
+def test_distortion_loss_matches_pairwise_sum(unbounded):
+    """Eq. S2 summed over all pairs: on lattice intervals [k*s, (k+1)*s] (bounded), on
+    [g(t), g(t + delta)] with mip-NeRF 360's g (unbounded)."""
     ids = torch.tensor([0, 0, 0, 2, 2, 2, 2])
     k = torch.tensor([3, 5, 6, 1, 2, 3, 9])
+    t = torch.tensor([0.3, 0.9, 1.5, 0.2, 0.6, 2.0, 7.0])
+    delta = torch.tensor([0.5, 0.4, 2.0, 0.3, 0.5, 3.0, 20.0])
     w, s = torch.rand(7), 0.1
-    got = ops.distortion_loss(w, k, s, ids, 3)
+    lo, hi = ops.distortion_intervals(k, t, delta, s, unbounded)
+    got = ops.distortion_loss(w, lo, hi, ids, 3)
+    g = lambda x: x if x <= 1 else 2 - 1 / x  # noqa: E731
     for r in range(3):
-        ww, m = w[ids == r], (k[ids == r] + 0.5) * s
-        ref = (ww[:, None] * ww[None] * (m[:, None] - m[None]).abs()).sum() + (ww ** 2).sum() * s / 3
+        sel = (ids == r).nonzero()[:, 0].tolist()
+        ww = w[sel].double()
+        if unbounded:
+            a = torch.tensor([g(float(t[i])) for i in sel], dtype=torch.float64)
+            b = torch.tensor([g(float(t[i] + delta[i])) for i in sel], dtype=torch.float64)
+        else:
+            a = k[sel].double() * s
+            b = a + s
+        m = (a + b) / 2
+        ref = (ww[:, None] * ww[None] * (m[:, None] - m[None]).abs()).sum() \
+            + (ww ** 2 * (b - a)).sum() / 3
         assert float(got[r]) == pytest.approx(float(ref), rel=1e-5, abs=1e-7)
 
 

@@ -261,15 +261,32 @@ def accumulate(values: torch.Tensor, ray_ids: torch.Tensor, n_rays: int) -> torc
     return out.index_add_(0, ray_ids, values)
 
 
-def distortion_loss(w: torch.Tensor, k: torch.Tensor, s: float, ray_ids: torch.Tensor,
-                    n_rays: int) -> torch.Tensor:
-    """Mip-NeRF 360 distortion loss (S2.2, Eq. S2) per ray (n_rays,), on the lattice: the
-    interval of sample k is ``[k*s, (k+1)*s]`` in lattice distance (world t when bounded,
-    contracted arc length from ``near`` when unbounded)."""
-    m = (k.to(w.dtype) + 0.5) * s
+def distortion_intervals(k: torch.Tensor, t: torch.Tensor, delta: torch.Tensor, s: float,
+                         unbounded: bool):
+    """(lo, hi) (M,) of each sample's interval in the distortion loss's normalised distance:
+    the lattice's ``[k*s, (k+1)*s]`` when bounded; when unbounded mip-NeRF 360's warp of
+    the camera distance, ``g(t) = t`` for t <= 1 and ``2 - 1/t`` beyond, of
+    ``[t, t + delta]`` (the lattice's contracted arc length would weigh far intervals ~10x
+    more and keep the training occupancy from pruning)."""
+    if not unbounded:
+        lo = k.to(t.dtype) * s
+        return lo, lo + s
+
+    def g(x):
+        return torch.where(x <= 1.0, x, 2.0 - 1.0 / torch.clamp(x, min=1.0))
+
+    return g(t), g(t + delta)
+
+
+def distortion_loss(w: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
+                    ray_ids: torch.Tensor, n_rays: int) -> torch.Tensor:
+    """Mip-NeRF 360 distortion loss (S2.2, Eq. S2) per ray (n_rays,) of packed samples with
+    weights w and intervals [lo, hi] (M,) (:func:`distortion_intervals`), samples of a ray
+    in marching order."""
+    m = 0.5 * (lo + hi)
     W = _segment_exclusive_cumsum(w, ray_ids, n_rays).to(w.dtype)
     S = _segment_exclusive_cumsum(w * m, ray_ids, n_rays).to(w.dtype)
-    per_sample = 2.0 * w * (m * W - S) + (s / 3.0) * w * w
+    per_sample = 2.0 * w * (m * W - S) + (hi - lo) / 3.0 * w * w
     return accumulate(per_sample, ray_ids, n_rays)
 
 

@@ -292,7 +292,9 @@ def _loop(model, opt, occ, gamma, start, sampler, tcfg, out, progress):
             o, d, target, bg = sampler.sample(n_rays)
             r = render_rays(model, o, d, occ.binary, gamma, bg)
             s = float(torch.tensor(gamma * model.cfg.s0, dtype=torch.float32))
-            dist = ops.distortion_loss(r["weights"], r["k"], s, r["ray_ids"], n_rays)
+            lo, hi = ops.distortion_intervals(r["k"], r["t"], r["delta"], s,
+                                              model.cfg.scene == "unbounded")
+            dist = ops.distortion_loss(r["weights"], lo, hi, r["ray_ids"], n_rays)
             colour = F.huber_loss(r["rgb"], target, delta=tcfg.huber_delta)
             loss = colour + eta * dist.mean()
             opt.zero_grad(set_to_none=True)
