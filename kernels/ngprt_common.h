@@ -24,8 +24,13 @@
 #define CLRENDER_NGPRT_COMMON_H
 #pragma OPENCL FP_CONTRACT OFF
 
-#if !defined(T_STOP) || !defined(N_MIP) || !defined(FEATURES) || !defined(FUSION_HIDDEN)
-#error "ngprt kernels need -D T_STOP N_MIP FEATURES FUSION_HIDDEN (config.kernel_constants)"
+#if !defined(T_STOP) || !defined(N_MIP) || !defined(FEATURES) || !defined(FUSION_HIDDEN) || \
+    !defined(LATTICE_BREAKS)
+#error "ngprt kernels need -D T_STOP N_MIP FEATURES FUSION_HIDDEN LATTICE_BREAKS (config.kernel_constants)"
+#endif
+/* The lattice table holds the ray's start, 12 candidates and its end (v_lattice_build). */
+#if LATTICE_BREAKS != 14
+#error "LATTICE_BREAKS must be 14: the start, 12 candidate breakpoints, the end"
 #endif
 #if !defined(VARIANT_SUM) || !defined(VARIANT_MLP) || !defined(VARIANT_SHARED_INV) || \
     !defined(VARIANT_SEPARATE_INV) || !defined(VARIANT_SHARED_V) || !defined(VARIANT_SEPARATE_V)
@@ -106,24 +111,6 @@ inline float3 ngp_contract(float3 x)
                     ax.z == m ? scaled.z : s.z);
 }
 
-/* Warped distance g(t) and its inverse (space.warp / space.unwarp). */
-inline float ngp_warp(float t)
-{
-#if UNBOUNDED
-    return t <= 1.0f ? t : 2.0f - 1.0f / ngp_maxf(t, 1.0f);
-#else
-    return t;
-#endif
-}
-
-inline float ngp_unwarp(float g)
-{
-#if UNBOUNDED
-    return g <= 1.0f ? g : 1.0f / (2.0f - ngp_maxf(g, 1.0f));
-#else
-    return g;
-#endif
-}
 
 /* Grid coordinates u in [0, 1]^3 of a world point (space.to_grid). */
 inline float3 ngp_to_grid(float3 p)
@@ -337,25 +324,117 @@ inline vpoint v_ray_dir(__global const float *cam, vint px, int py)
     return d;
 }
 
-inline vfloat v_warp(vfloat t)
-{
 #if UNBOUNDED
-    return select(2.0f - 1.0f / v_max(t, 1.0f), t, VMASK(t <= 1.0f));
-#else
-    return t;
-#endif
+/* The unbounded step lattice of RAYS rays, one per lane (space.lattice_table, docs/ngprt.md
+ * "Step lattice"): the contracted arc length S(t) from the ray's start, in closed form on
+ * the pieces between LATTICE_BREAKS sorted breakpoints; lattice point k sits at
+ * t_k = S^-1(k * s). Per lane the same float32 operations as the reference; held as
+ * vectors so that placing a point costs a few vector selects and one division. */
+typedef struct {
+    vfloat brk[LATTICE_BREAKS], cum[LATTICE_BREAKS];
+    vfloat A[LATTICE_BREAKS - 1], B[LATTICE_BREAKS - 1], K[LATTICE_BREAKS - 1];
+} v_lattice;
+
+/* A candidate breakpoint: c where t0 < c < t1 (false for NaN), else t1. */
+inline vfloat v_cand(vfloat c, vfloat t0, vfloat t1)
+{
+    return select(t1, c, VMASK(c > t0) & VMASK(c < t1));
 }
 
-inline vfloat v_unwarp(vfloat g)
+/* x, y or z of a point: the one of axis isx ? 0 : (isy ? 1 : 2). */
+inline vfloat v_axis(vfloat x, vfloat y, vfloat z, vint isx, vint isy)
 {
-#if UNBOUNDED
-    return select(1.0f / (2.0f - v_max(g, 1.0f)), g, VMASK(g <= 1.0f));
-#else
-    return g;
-#endif
+    return select(select(z, y, isy), x, isx);
 }
 
-#if UNBOUNDED
+inline void v_lattice_build(float3 o3, vpoint dv, float near, float far, v_lattice *lt)
+{
+    const vfloat t0 = (vfloat)(near), t1 = (vfloat)(far);
+    const float o[3] = {o3.x, o3.y, o3.z};
+    const vfloat d[3] = {dv.x, dv.y, dv.z};
+    vfloat c[12];
+    int n = 0;
+    for (int i = 0; i < 2; ++i)
+        for (int j = i + 1; j < 3; ++j) {
+            c[n++] = v_cand((o[j] - o[i]) / (d[i] - d[j]), t0, t1);
+            c[n++] = v_cand(-(o[i] + o[j]) / (d[i] + d[j]), t0, t1);
+        }
+    for (int i = 0; i < 3; ++i) {
+        c[n++] = v_cand((1.0f - o[i]) / d[i], t0, t1);
+        c[n++] = v_cand((-1.0f - o[i]) / d[i], t0, t1);
+    }
+    /* Sorting network (no NaN, no zero: min/max give the sorted values, as np.sort). */
+    for (int i = 0; i < 11; ++i)
+        for (int j = 0; j < 11 - i; ++j) {
+            const vfloat lo = v_min(c[j], c[j + 1]), hi = v_max(c[j], c[j + 1]);
+            c[j] = lo;
+            c[j + 1] = hi;
+        }
+    lt->brk[0] = t0;
+    for (int i = 0; i < 12; ++i) lt->brk[i + 1] = c[i];
+    lt->brk[LATTICE_BREAKS - 1] = t1;
+    lt->cum[0] = (vfloat)(0.0f);
+    for (int q = 0; q < LATTICE_BREAKS - 1; ++q) {
+        const vfloat ta = lt->brk[q], tb = lt->brk[q + 1];
+        const vfloat tm = ta + (tb - ta) * 0.5f;
+        const vfloat x0 = o[0] + tm * d[0], x1 = o[1] + tm * d[1], x2 = o[2] + tm * d[2];
+        const vfloat ax = v_abs(x0), ay = v_abs(x1), az = v_abs(x2);
+        const vfloat mm = v_max(v_max(ax, ay), az);
+        const vint isx = VMASK(ax == mm), isy = VMASK(ay == mm);
+        const vfloat sg = select((vfloat)(-1.0f), (vfloat)(1.0f),
+                                 VMASK(v_axis(x0, x1, x2, isx, isy) > 0.0f));
+        const vfloat p0 = o[0] + ta * d[0], p1 = o[1] + ta * d[1], p2 = o[2] + ta * d[2];
+        const vfloat ma = sg * v_axis(p0, p1, p2, isx, isy);
+        const vfloat b = sg * v_axis(d[0], d[1], d[2], isx, isy);
+        const vfloat e0 = d[0] * ma - p0 * b, e1 = d[1] * ma - p1 * b, e2 = d[2] * ma - p2 * b;
+        const vfloat K = sqrt(e0 * e0 + e1 * e1 + e2 * e2 + b * b);
+        const vint inner = VMASK(mm <= 1.0f);
+        lt->A[q] = select(ma * ma, (vfloat)(1.0f), inner);
+        lt->B[q] = select(ma * b, (vfloat)(0.0f), inner);
+        lt->K[q] = select(K, (vfloat)(1.0f), inner);
+        const vfloat tau = tb - ta;
+        lt->cum[q + 1] = lt->cum[q] + lt->K[q] * tau / (lt->A[q] + lt->B[q] * tau);
+    }
+}
+
+/* S^-1(sigma) for 0 <= sigma < S(t_end) (space.lattice_t): piece j = the last q with
+ * cum_q <= sigma. */
+inline vfloat v_lattice_t(const v_lattice *lt, vfloat sigma)
+{
+    vfloat c = lt->cum[0], ta = lt->brk[0], tb = lt->brk[1];
+    vfloat A = lt->A[0], B = lt->B[0], K = lt->K[0];
+    for (int q = 1; q < LATTICE_BREAKS - 1; ++q) {
+        const vint m = VMASK(lt->cum[q] <= sigma);
+        c = select(c, lt->cum[q], m);
+        ta = select(ta, lt->brk[q], m);
+        tb = select(tb, lt->brk[q + 1], m);
+        A = select(A, lt->A[q], m);
+        B = select(B, lt->B[q], m);
+        K = select(K, lt->K[q], m);
+    }
+    const vfloat r = sigma - c;
+    const vfloat den = K - B * r;
+    return select(tb, v_min(ta + A * r / den, tb), VMASK(den > 0.0f));
+}
+
+/* S(t) for t >= t_start, clamped to t_end (space.lattice_s): piece j = the last q with
+ * brk_q <= t. */
+inline vfloat v_lattice_s(const v_lattice *lt, vfloat t)
+{
+    t = v_min(t, lt->brk[LATTICE_BREAKS - 1]);
+    vfloat c = lt->cum[0], ta = lt->brk[0], A = lt->A[0], B = lt->B[0], K = lt->K[0];
+    for (int q = 1; q < LATTICE_BREAKS - 1; ++q) {
+        const vint m = VMASK(lt->brk[q] <= t);
+        c = select(c, lt->cum[q], m);
+        ta = select(ta, lt->brk[q], m);
+        A = select(A, lt->A[q], m);
+        B = select(B, lt->B[q], m);
+        K = select(K, lt->K[q], m);
+    }
+    const vfloat tau = t - ta;
+    return c + K * tau / (A + B * tau);
+}
+
 /* ngp_contract per lane. */
 inline vpoint v_contract(vpoint x)
 {
@@ -371,6 +450,8 @@ inline vpoint v_contract(vpoint x)
     c.z = select(select(sz, sz * scale, VMASK(az == m)), x.z, inner);
     return c;
 }
+#else
+typedef struct { int unused; } v_lattice;   /* bounded: t_k = k * s, no table */
 #endif
 
 /* u = to_grid(o + t * d) per lane (ngp_point_u). */

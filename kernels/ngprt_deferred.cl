@@ -132,7 +132,10 @@ inline void ngp_load_inputs(__global const float *cam, int width, int n_pix, int
         for (int i = 0; i < SH_DIM; ++i) sh[i] = 0.0f;
         if (p < n_pix) {
             f = vload8(p, feat);
-            ngp_sh4(camera_ray_dir(cam, p % width, p / width), sh);
+            /* p - py * width, not p % width: LLVM turns a div/rem pair into a freeze
+             * instruction, which Oclgrind 21.10's uninitialised-value check aborts on. */
+            const int py = p / width;
+            ngp_sh4(camera_ray_dir(cam, p - py * width, py), sh);
         }
         const float *fv = (const float *)&f;
         for (int i = 0; i < N_FEAT; ++i) LANE(x[i], lane) = fv[i];

@@ -3,7 +3,7 @@
  * Each work-item marches RAYS neighbouring pixels of one row (-D RAYS = 1, 2, 4, 8 or
  * 16), one ray per lane of a vector, in lockstep like the numpy reference
  * (clrender/ngprt/render_ref.py:march_reference): every pass of the loop places the
- * current lattice point t_k = unwarp(k * s) of all lanes at once and reads one ushort
+ * current lattice point t_k (k * s, or S^-1(k * s) unbounded) of all lanes at once and reads one ushort
  * per lane, the exit code of its finest cell (render_cl.exit_codes: low byte 0 occupied,
  * else 1 + the exit level, as the mip is a max-pool and the finest cell decides every
  * level; high byte G where it is read, G_IN_CODE), skips empty space with the mip and
@@ -67,7 +67,8 @@ inline int ngp_first_outside(int k_in, int k_out, float s, float3 o, float3 d, i
  * k_next - 1 has left the empty cell, bisect for the first point outside it.
  * render_ref.skip_bounded. */
 inline vint v_skip(vint k, vfloat t, float3 o, vpoint d, vpoint u, vcell c0, vint empty,
-                   vint lev, vint g_code, float s, vfloat g_end, __global const uchar *G)
+                   vint lev, vint g_code, float s, vfloat g_end, __global const uchar *G,
+                   const v_lattice *lt)
 {
     const vint res = (vint)(L_C) >> lev;
     /* 2 / res: L_C >> lev = L_C / 2^lev exactly, and scaling by 2^lev is exact. */
@@ -176,7 +177,8 @@ inline float3 ngp_lane3(vfloat x, vfloat y, vfloat z, int j)
  * the point after a jump is tested, and the lane goes on from it while it is inside.
  * render_ref.skip_unbounded. */
 inline vint v_skip(vint k, vfloat t, float3 o, vpoint d, vpoint u, vcell c0, vint empty,
-                   vint lev, vint g_code, float s, vfloat g_end, __global const uchar *G)
+                   vint lev, vint g_code, float s, vfloat g_end, __global const uchar *G,
+                   const v_lattice *lt)
 {
     const vint res = (vint)(L_C) >> lev;
     vcell cell;
@@ -191,7 +193,9 @@ inline vint v_skip(vint k, vfloat t, float3 o, vpoint d, vpoint u, vcell c0, vin
     const vint cube = VMASK(g > 0) & VMASK(half_side > 0.0f);
     const vfloat lim = g_end / s + 2.0f;
     vint walking = empty;
+    vfloat tk = v_lattice_t(lt, VF(k) * s);
     while (any(walking)) {
+        vfloat T = tk;
         FOR_LANES(j) {
             if (!LANE_I(walking, j)) continue;
             const float sz = LANE_F(size, j), mg = LANE_F(margin, j), hf = LANE_F(half_side, j);
@@ -199,14 +203,15 @@ inline vint v_skip(vint k, vfloat t, float3 o, vpoint d, vpoint u, vcell c0, vin
                                       (float)LANE_I(cell.z, j));
             const float3 dj = ngp_lane3(d.x, d.y, d.z, j);
             const float3 cj = ngp_lane3(u.x, u.y, u.z, j) * 4.0f - 2.0f;
-            const int kj = LANE_I(k, j);
-            const float tj = ngp_unwarp((float)kj * s);
-            float T = ngp_box_exit(o, dj, tj, i * sz - 2.0f + mg, (i + 1.0f) * sz - 2.0f - mg);
-            if (LANE_I(cube, j)) T = ngp_maxf(T, ngp_box_exit(o, dj, tj, cj - hf, cj + hf));
-            LANE_I(k, j) = max(kj + 1, ngp_ceil_i(ngp_minf(ngp_warp(T) / s - 1e-3f,
-                                                             LANE_F(lim, j))));
+            const float tj = LANE_F(tk, j);
+            float Tj = ngp_box_exit(o, dj, tj, i * sz - 2.0f + mg, (i + 1.0f) * sz - 2.0f - mg);
+            if (LANE_I(cube, j)) Tj = ngp_maxf(Tj, ngp_box_exit(o, dj, tj, cj - hf, cj + hf));
+            LANE_F(T, j) = Tj;
         }
-        const vpoint uk = v_point_u(o, d, v_unwarp(VF(k) * s));
+        const vint jump = v_ceil_i(v_min(v_lattice_s(lt, T) / s - 1e-3f, lim));
+        k = select(k, max(k + 1, jump), walking);
+        tk = v_lattice_t(lt, VF(k) * s);
+        const vpoint uk = v_point_u(o, d, tk);
         const vfloat dx = uk.x - u.x, dy = uk.y - u.y, dz = uk.z - u.z;
         const vint stay = v_same_cell(v_cell(uk, res), cell)
                           | (VMASK(g > 0) & VMASK(sqrt(dx * dx + dy * dy + dz * dz) < radius));
@@ -306,7 +311,8 @@ inline float8 ngp_lane_features(int j, const vint *idx, const vfloat *wt,
  * index k) into acc (per lane), *T, *opacity, *depth_acc (render_ref.composite): the
  * features lane by lane, density and alpha for all lanes at once (two vector exps). */
 inline void v_composite(vint sample, vint k, vfloat t, vpoint u, vcell c0, float s,
-                        vfloat g_end, __global const int *block_index,
+                        vfloat g_end, const v_lattice *lt, float far,
+                        __global const int *block_index,
                         __global const float8 *blocks, int n_blocks,
                         __global const float8 *tables, __global const float *fusion,
                         const float8 *inv_sig, float8 *acc, vfloat *T, vfloat *opacity,
@@ -326,8 +332,10 @@ inline void v_composite(vint sample, vint k, vfloat t, vpoint u, vcell c0, float
     }
     const vfloat sigma = NGP_EXP(VLOAD(logit));
 #if UNBOUNDED
-    /* unwarp is undefined at g >= 2: the last interval ends at the ray's end. */
-    const vfloat delta = v_unwarp(v_min(VF(k + 1) * s, g_end)) - t;
+    /* The last interval ends at the ray's end. */
+    const vfloat g_next = VF(k + 1) * s;
+    const vfloat delta = select((vfloat)(far), v_lattice_t(lt, v_min(g_next, g_end)),
+                                VMASK(g_next < g_end)) - t;
 #else
     const vfloat delta = VF(k + 1) * s - t;
 #endif
@@ -342,14 +350,18 @@ inline void v_composite(vint sample, vint k, vfloat t, vpoint u, vcell c0, float
 }
 
 /* The ray range (ray_range): returns the lanes that hit (t_start <= t_end; not for a
- * missed box, nor inf/NaN from an axis-parallel ray outside it), with *g_end = warp(t_end)
- * and *k the first lattice index ceil(warp(t_start) / s) (0 where missed: ceil() of inf
- * never reaches an int). */
+ * missed box, nor inf/NaN from an axis-parallel ray outside it), with *g_end the end of
+ * the lattice distance and *k the first lattice index: bounded t_end and ceil(t_start / s)
+ * (0 where missed: ceil() of inf never reaches an int); unbounded S(far) and 0, the
+ * lattice of each lane built into lt. */
 inline vint v_ray_start(float3 o, vpoint d, float near, float far, float s, vfloat *g_end,
-                        vint *k)
+                        vint *k, v_lattice *lt)
 {
 #if UNBOUNDED
-    const vfloat t_start = (vfloat)(near), t_end = (vfloat)(far);
+    v_lattice_build(o, d, near, far, lt);
+    *g_end = lt->cum[LATTICE_BREAKS - 1];
+    *k = (vint)(0);
+    return (vint)(-1);
 #else
     /* space.ray_box per lane; fmin/fmax drop the NaN of 0 * inf like numpy's. */
     const vfloat ix = 1.0f / d.x, iy = 1.0f / d.y, iz = 1.0f / d.z;
@@ -359,11 +371,11 @@ inline vint v_ray_start(float3 o, vpoint d, float near, float far, float s, vflo
     const vfloat t_in = fmax(fmax(fmin(x0, x1), fmin(y0, y1)), fmin(z0, z1));
     const vfloat t_start = fmax((vfloat)(near), t_in);
     const vfloat t_end = fmin(fmin(fmax(x0, x1), fmax(y0, y1)), fmax(z0, z1));
-#endif
-    *g_end = v_warp(t_end);
+    *g_end = t_end;
     const vint hit = VMASK(t_start <= t_end);
-    *k = v_ceil_i(select((vfloat)(0.0f), v_warp(t_start) / s, hit));
+    *k = v_ceil_i(select((vfloat)(0.0f), t_start / s, hit));
     return hit;
+#endif
 }
 
 /* The attention weights of the -inv variants, sigmoid of the invariant logits (N_INV
@@ -397,7 +409,9 @@ __kernel void ngprt_march(__global const float *cam, const int width, const int 
     const vpoint d = v_ray_dir(cam, px, py);
     vfloat g_end;
     vint k;
-    const vint hit = v_ray_start(o, d, near, far, s, &g_end, &k) & VMASK(px < width);
+    v_lattice lattice;
+    const v_lattice *lt = &lattice;
+    const vint hit = v_ray_start(o, d, near, far, s, &g_end, &k, &lattice) & VMASK(px < width);
     k = select((vint)(0), k, hit);
     vint n_march = (vint)(0), n_occ = (vint)(0);
     vfloat T = (vfloat)(1.0f), opacity = (vfloat)(0.0f), depth_acc = (vfloat)(0.0f);
@@ -408,18 +422,22 @@ __kernel void ngprt_march(__global const float *cam, const int width, const int 
     vint active = hit & VMASK(VF(k) * s < g_end);
     while (any(active)) {
         n_march -= active;
-        const vfloat t = v_unwarp(VF(k) * s);
+#if UNBOUNDED
+        const vfloat t = v_lattice_t(lt, VF(k) * s);
+#else
+        const vfloat t = VF(k) * s;
+#endif
         const vpoint u = v_point_u(o, d, t);
         const vcell c0 = v_cell(u, (vint)(L_C));
         const vint code = v_gather_u16(exit_code, v_flat(c0, (vint)(L_C)), active);
         const vint sample = active & VMASK((code & 0xff) == 0);
         const vint empty = active & ~sample;
         if (any(sample))
-            v_composite(sample, k, t, u, c0, s, g_end, block_index, blocks, n_blocks, tables,
+            v_composite(sample, k, t, u, c0, s, g_end, lt, far, block_index, blocks, n_blocks, tables,
                         fusion, inv_sig, acc, &T, &opacity, &depth_acc);
         if (any(empty))
             k = select(k, v_skip(k, t, o, d, u, c0, empty, (code & 0xff) - 1, code >> 8, s,
-                                 g_end, G), empty);
+                                 g_end, G, lt), empty);
         n_occ -= sample;
         k -= sample;
         active = active & VMASK(VF(k) * s < g_end) & VMASK(T >= T_STOP);

@@ -25,7 +25,8 @@ from clrender.ngprt.baked import validate
 from clrender.ngprt.config import ModelConfig
 from clrender.ngprt.random_model import empty_model_with_occupancy
 from clrender.ngprt.render_ref import _cells, _lattice_g, _point_u, march_reference, ray_range
-from clrender.ngprt.space import cell_index, to_grid, unwarp, warp
+from clrender.ngprt.space import (cell_index, lattice_end, lattice_rows, lattice_t, lattice_table,
+                                  to_grid)
 
 F32 = np.float32
 L_C, G_RES, GAMMA = 64, 32, 0.5
@@ -90,21 +91,22 @@ def make_rays(model, n: int = N_RAYS, seed: int = 0):
 
 def occupied_lattice_points(model, o: np.ndarray, d: np.ndarray, chunk: int = 1500):
     """(N,) number of lattice points of each ray whose occupancy_0 cell is occupied:
-    every k with k0 <= k and k * s < warp(t_end), placed as the contract places it."""
+    every k with 0 <= k and k * s < S(t_end), placed as the contract places it."""
     cfg, s = model.config, F32(model.step)
     occ = model.arrays["occupancy_0"]
     t_start, t_end, hit = ray_range(cfg, o, d)
-    g_end = warp(t_end, True)
-    k0 = np.ceil(warp(t_start, True) / s).astype(np.int64)
-    n_k = int(np.ceil(F32(2.0) / s)) + 2
+    table = lattice_table(o, d, t_start, t_end)
+    g_end = lattice_end(table)
+    n_k = int(np.ceil(g_end.max() / s)) + 2
     out = np.zeros(len(o), np.int64)
     for a in range(0, len(o), chunk):
         rows = np.arange(a, min(a + chunk, len(o)))
-        k = k0[rows, None] + np.arange(n_k)[None, :]
+        k = np.broadcast_to(np.arange(n_k)[None, :], (len(rows), n_k))
         g = _lattice_g(k, s)
         keep = hit[rows, None] & (g < g_end[rows, None])
         with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-            t = unwarp(g, True)
+            rep_rows = np.repeat(rows, n_k)
+            t = lattice_t(lattice_rows(table, rep_rows), g.reshape(-1)).reshape(g.shape)
             p = o[rows, None, :] + t[..., None] * d[rows, None, :]
             u = to_grid(np.where(keep[..., None], p, F32(0.0)), 2.0, True)
         c = cell_index(u, L_C)
@@ -112,7 +114,7 @@ def occupied_lattice_points(model, o: np.ndarray, d: np.ndarray, chunk: int = 15
     return out
 
 
-def walk_skip(model, k, o, d, u, exit_lev, g, s, g_end):
+def walk_skip(model, k, o, d, u, exit_lev, g, s, g_end, table):
     """The skip as a walk point by point (the contract before the closed form)."""
     cfg = model.config
     res = cfg.L_C >> exit_lev
@@ -122,7 +124,7 @@ def walk_skip(model, k, o, d, u, exit_lev, g, s, g_end):
     walking = _lattice_g(k, s) < g_end
     while walking.any():
         w = np.flatnonzero(walking)
-        uk = _point_u(cfg, o[w], d[w], unwarp(_lattice_g(k[w], s), True))
+        uk = _point_u(cfg, o[w], d[w], lattice_t(lattice_rows(table, w), _lattice_g(k[w], s)))
         du = uk - u[w]
         dist = np.sqrt(du[:, 0] * du[:, 0] + du[:, 1] * du[:, 1] + du[:, 2] * du[:, 2])
         stay = np.all(_cells(uk, res[w]) == cell[w], axis=1) | ((g[w] > 0) & (dist < radius[w]))

@@ -17,7 +17,7 @@ from clrender.ngprt.config import T_STOP, preset
 from clrender.ngprt.random_model import random_baked_model
 from clrender.ngprt.render_ref import (deferred_reference, features, march_reference,
                                        render_reference)
-from clrender.ngprt.space import cell_index, ray_box, to_grid, unwarp, warp
+from clrender.ngprt.space import cell_index, lattice_end, lattice_t, lattice_table, ray_box, to_grid
 
 F32 = np.float32
 # Outside the content; the unbounded eye sits in the contracted shell (|x|_inf = 2.5).
@@ -89,7 +89,7 @@ def test_opacity_depth_and_early_stop(scene_model, monkeypatch):
     full = march_reference(model, o, d)
     assert np.all(full["n_occ"] >= out["n_occ"])
     assert full["n_occ"][stopped].sum() > out["n_occ"][stopped].sum()
-    assert np.all(out["n_occ"][stopped] <= 8)       # opaque within a few samples
+    assert np.all(out["n_occ"][stopped] <= 12)      # opaque within a few samples
     np.testing.assert_allclose(full["opacity"], op, atol=T_STOP)
     np.testing.assert_allclose(full["acc"], out["acc"], atol=0.05)   # T < 2e-3 times |f| < 25
 
@@ -108,15 +108,21 @@ def brute_force_ray(model, o, d):
     acc, T, opacity, n_occ = np.zeros(7, F32), F32(1), F32(0), 0
     if not t_start <= t_end:
         return acc, opacity, n_occ
-    g_end = warp(t_end, unbounded)
-    k = int(np.ceil(warp(t_start, unbounded) / s))
+    if unbounded:   # t_k = S^-1(k * s), S the contracted arc length from t_start
+        table = lattice_table(o, d, np.array([t_start], F32), np.array([t_end], F32))
+        g_end, k = lattice_end(table)[0], 0
+        place = lambda g: lattice_t(table, np.array([g], F32))[0]   # noqa: E731
+    else:
+        g_end, k = t_end, int(np.ceil(t_start / s))
+        place = lambda g: g   # noqa: E731
     while F32(k) * s < g_end and T >= F32(T_STOP):
-        t = unwarp(F32(k) * s, unbounded)
+        t = place(F32(k) * s)
         u = to_grid(o + t * d, cfg.extent, unbounded)
         if model.arrays["occupancy_0"][tuple(cell_index(u, cfg.L_C)[0])]:
             f = features(model, u)[0]
             g_next = F32(k + 1) * s
-            delta = unwarp(min(g_next, g_end) if unbounded else g_next, unbounded) - t
+            t_next = (place(g_next) if g_next < g_end else t_end) if unbounded else g_next
+            delta = t_next - t
             alpha = F32(1) - np.exp(-np.exp(f[0]) * delta)
             w = T * alpha
             acc, opacity, T = acc + w * f[1:8], opacity + w, T * (F32(1) - alpha)
@@ -150,7 +156,7 @@ def test_skipping_matches_brute_force(scene, variant, eye, gamma):
 
 def test_unbounded_last_interval_ends_at_far():
     """Occupied up to the edge of the contracted cube: the last interval ends at ``far``
-    (not at g = 2, where unwarp is infinite), so everything stays finite."""
+    (the lattice's last point is short of S(far)), so everything stays finite."""
     m = make_model("unbounded")
     cfg, a = m.config, dict(m.arrays)
     occ = np.ones((cfg.L_C,) * 3, np.uint8)

@@ -20,14 +20,20 @@ def _t(a):
 
 # -- torch twins == numpy primitives (bit for bit on CPU, same float32 operations) --------
 
-def test_contract_warp_unwarp_match_numpy():
+def test_contract_and_lattice_match_numpy():
     x = (RNG.normal(size=(20000, 3)) * RNG.choice([0.3, 3.0, 300.0], (20000, 1))).astype(np.float32)
     assert np.array_equal(ops.contract(_t(x)).numpy(), space.contract(x))
-    t = RNG.uniform(0, 100, 20000).astype(np.float32)
-    g = RNG.uniform(0, 1.999, 20000).astype(np.float32)
+    o = x[:2000]
+    d = RNG.normal(size=(2000, 3)).astype(np.float32)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t0, t1 = np.full(2000, np.float32(0.05)), np.full(2000, np.float32(1000.0))
+    table = space.lattice_table(o, d, t0, t1)
+    table_t = ops.lattice_table(_t(o), _t(d), _t(t0), _t(t1))
+    for a, b in zip(table, table_t):
+        assert np.array_equal(a, b.numpy())
+    g = (RNG.uniform(0, 1, 2000) * space.lattice_end(table)).astype(np.float32)
+    assert np.array_equal(space.lattice_t(table, g), ops.lattice_t(table_t, _t(g)).numpy())
     for unbounded in (False, True):
-        assert np.array_equal(ops.warp(_t(t), unbounded).numpy(), space.warp(t, unbounded))
-        assert np.array_equal(ops.unwarp(_t(g), unbounded).numpy(), space.unwarp(g, unbounded))
         assert np.array_equal(ops.to_grid(_t(x), 2.0, unbounded).numpy(),
                               space.to_grid(x, 2.0, unbounded))
     u = RNG.uniform(-0.1, 1.1, (5000, 3)).astype(np.float32)
@@ -98,11 +104,15 @@ def _lattice_loop(o, d, occ, s, cfg):
         t_in, t_out = space.ray_box(o[None], d[None])
         t_start, t_end = max(np.float32(cfg.near), t_in[0]), t_out[0]
     s = np.float32(s)
-    g_end = space.warp(t_end, unb)
-    k = int(np.ceil(space.warp(t_start, unb) / s))
+    if unb:
+        table = space.lattice_table(o[None], d[None], np.array([t_start]), np.array([t_end]))
+        g_end, k = space.lattice_end(table)[0], 0
+    else:
+        g_end, k = t_end, int(np.ceil(t_start / s))
     out = []
     while np.float32(k) * s < g_end:
-        t = space.unwarp(np.float32(k) * s, unb)
+        g = np.float32(k) * s
+        t = space.lattice_t(table, np.array([g]))[0] if unb else g
         u = space.to_grid((o + t * d)[None], cfg.extent, unb)
         c = space.cell_index(u, occ.shape[0])[0]
         if occ[tuple(c)]:
@@ -143,15 +153,30 @@ def test_composite_matches_sequential_loop():
         np.testing.assert_allclose(w[ids == r].numpy(), ref, rtol=1e-5, atol=1e-7)
 
 
-def test_distortion_loss_matches_pairwise_sum():
-    """Eq. S2 summed over all pairs, on lattice intervals [k*s, (k+1)*s]."""
+@pytest.mark.parametrize("unbounded", [False, True])
+def test_distortion_loss_matches_pairwise_sum(unbounded):
+    """Eq. S2 summed over all pairs: on lattice intervals [k*s, (k+1)*s] (bounded), on
+    [g(t), g(t + delta)] with mip-NeRF 360's g (unbounded)."""
     ids = torch.tensor([0, 0, 0, 2, 2, 2, 2])
     k = torch.tensor([3, 5, 6, 1, 2, 3, 9])
+    t = torch.tensor([0.3, 0.9, 1.5, 0.2, 0.6, 2.0, 7.0])
+    delta = torch.tensor([0.5, 0.4, 2.0, 0.3, 0.5, 3.0, 20.0])
     w, s = torch.rand(7), 0.1
-    got = ops.distortion_loss(w, k, s, ids, 3)
+    lo, hi = ops.distortion_intervals(k, t, delta, s, unbounded)
+    got = ops.distortion_loss(w, lo, hi, ids, 3)
+    g = lambda x: x if x <= 1 else 2 - 1 / x  # noqa: E731
     for r in range(3):
-        ww, m = w[ids == r], (k[ids == r] + 0.5) * s
-        ref = (ww[:, None] * ww[None] * (m[:, None] - m[None]).abs()).sum() + (ww ** 2).sum() * s / 3
+        sel = (ids == r).nonzero()[:, 0].tolist()
+        ww = w[sel].double()
+        if unbounded:
+            a = torch.tensor([g(float(t[i])) for i in sel], dtype=torch.float64)
+            b = torch.tensor([g(float(t[i] + delta[i])) for i in sel], dtype=torch.float64)
+        else:
+            a = k[sel].double() * s
+            b = a + s
+        m = (a + b) / 2
+        ref = (ww[:, None] * ww[None] * (m[:, None] - m[None]).abs()).sum() \
+            + (ww ** 2 * (b - a)).sum() / 3
         assert float(got[r]) == pytest.approx(float(ref), rel=1e-5, abs=1e-7)
 
 

@@ -27,9 +27,17 @@ MAX_L_C = 1024
 # tiny gamma cannot make a march run (almost) forever or overflow the kernels' int k.
 MAX_LATTICE_POINTS = 1 << 20
 LOG2_T_RANGE = (4, 24)    # hash table sizes 2^4 .. 2^24, fine and auxiliary
-# Farthest near/far (world units): beyond ~8e6, warp(far) = 2 - 1/far rounds to 2 in
-# float32, where unwarp is infinite (docs/ngprt.md "Step lattice").
+# Breakpoints of an unbounded ray's lattice (docs/ngprt.md "Step lattice"): its start, the
+# 12 candidate region changes of MERF's contraction, its end.
+LATTICE_BREAKS = 14
+# Farthest near/far (world units): keeps the unbounded lattice's per-piece terms
+# (A = m^2 up to ~1e12, K * tau) far inside float32 (docs/ngprt.md "Step lattice").
 MAX_FAR = 1e6
+# Longest contracted arc length of an unbounded ray (S2.3, docs/ngprt.md "Step lattice"):
+# a line crosses each of the contraction's 7 convex regions at most once, on one straight
+# contracted segment: at most the diagonal 2*sqrt(3) of the unit cube plus 6 times the
+# diagonal 3 of an outer region's image [1, 2] x [-1, 1]^2.
+MAX_CONTRACTED_LENGTH = 2.0 * math.sqrt(3.0) + 6 * 3.0
 # -D VARIANT codes of the kernels, VARIANT_SUM = 0 .. VARIANT_SEPARATE_V = 5.
 VARIANT_CODES = {v: code for code, v in enumerate(VARIANTS)}
 
@@ -42,11 +50,12 @@ def kernel_constants() -> dict:
 
     Returns:
         ``{name: value}``: T_STOP, N_MIP, FEATURES, SH_DIM, DEFERRED_HIDDEN,
-        FUSION_HIDDEN and ``VARIANT_<NAME>`` (e.g. ``VARIANT_SEPARATE_V``) for each of
+        FUSION_HIDDEN, LATTICE_BREAKS and ``VARIANT_<NAME>`` (e.g. ``VARIANT_SEPARATE_V``) for each of
         :data:`VARIANTS` with its code from :data:`VARIANT_CODES`.
     """
     out = {"T_STOP": T_STOP, "N_MIP": N_MIP, "FEATURES": FEATURES, "SH_DIM": SH_DIM,
-           "DEFERRED_HIDDEN": DEFERRED_HIDDEN, "FUSION_HIDDEN": FUSION_HIDDEN}
+           "DEFERRED_HIDDEN": DEFERRED_HIDDEN, "FUSION_HIDDEN": FUSION_HIDDEN,
+           "LATTICE_BREAKS": LATTICE_BREAKS}
     for variant, code in VARIANT_CODES.items():
         out["VARIANT_" + variant.upper().replace("-", "_")] = code
     return out
@@ -111,16 +120,20 @@ class ModelConfig:
 
     @property
     def s0(self) -> float:
-        """Base lattice step: the diagonal of a coarse voxel, 2*sqrt(3)/L_C in the
-        bounded [-1, 1]^3 cube (S2.3: 2*sqrt(3)/512 for L_C = 512)."""
+        """Base lattice step 2*sqrt(3)/L_C (S2.3: 2*sqrt(3)/512 for L_C = 512, "inside our
+        [-1, 1]^3 ROI grid"): world units in a bounded scene (a coarse voxel's diagonal);
+        contracted units, uniformly, in an unbounded one (half a coarse voxel's diagonal
+        of [-2, 2]^3, the same step as a bounded scene inside the unit cube, where the
+        contraction is the identity)."""
         return 2.0 * math.sqrt(3.0) / self.L_C
 
     @property
     def max_ray_length(self) -> float:
         """Longest range of lattice distances a ray can have: the diagonal ``2*sqrt(3)``
-        of the bounded [-1, 1]^3 box, or the whole warped range ``[0, 2)`` of an
-        unbounded scene (S2.3). Over the step it bounds the lattice points of a ray."""
-        return 2.0 * math.sqrt(3.0) if self.scene == "bounded" else 2.0
+        of the bounded [-1, 1]^3 box, or the longest contracted arc length of an
+        unbounded ray, :data:`MAX_CONTRACTED_LENGTH` (~21.5). Over the step it bounds the
+        lattice points of a ray."""
+        return 2.0 * math.sqrt(3.0) if self.scene == "bounded" else MAX_CONTRACTED_LENGTH
 
     @property
     def min_gamma(self) -> float:

@@ -215,7 +215,7 @@ def render_rays(model: NGPRT, origins: torch.Tensor, dirs: torch.Tensor,
     taken = ray_ids if t_stop is None else ray_ids[T >= t_stop]
     n_occ = torch.bincount(taken, minlength=n)
     return {"rgb": rgb, "opacity": opacity, "depth": depth, "n_occ": n_occ,
-            "weights": w, "k": k, "ray_ids": ray_ids, "t": t}
+            "weights": w, "k": k, "ray_ids": ray_ids, "t": t, "delta": delta}
 
 
 @torch.no_grad()

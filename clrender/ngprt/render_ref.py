@@ -20,7 +20,8 @@ import numpy as np
 from ..camera import generate_rays
 from .config import N_MIP, T_STOP
 from .encoding import hash_corner, sh4
-from .space import cell_index, ray_box, to_grid, unwarp, warp
+from .space import (cell_index, lattice_end, lattice_rows, lattice_s, lattice_t, lattice_table,
+                    ray_box, to_grid)
 
 F32 = np.float32
 # Corner c = 0..7 of a cell is offset ((c >> 2) & 1, (c >> 1) & 1, c & 1): x slowest.
@@ -32,8 +33,16 @@ def _sigmoid(x: np.ndarray) -> np.ndarray:
 
 
 def _lattice_g(k: np.ndarray, s: F32) -> np.ndarray:
-    """Warped distance ``(float)k * s`` of lattice index k."""
+    """Lattice distance ``(float)k * s`` of lattice index k: world t (bounded) or
+    contracted arc length from the ray's start (unbounded)."""
     return k.astype(F32) * s
+
+
+def lattice_point(cfg, table, k: np.ndarray, s: F32) -> np.ndarray:
+    """Distance t of lattice point k: ``k * s`` (bounded) or ``S^-1(k * s)`` (unbounded,
+    ``table`` the rays' :func:`space.lattice_table` rows)."""
+    g = _lattice_g(k, s)
+    return lattice_t(table, g) if cfg.scene == "unbounded" else g
 
 
 def _point_u(cfg, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -204,13 +213,14 @@ def _box_exit(o, d, t, lo, hi) -> np.ndarray:
     return np.where(inside, t + dt, t)
 
 
-def skip_unbounded(model, k, o, d, u, exit_lev, g, s, g_end) -> np.ndarray:
+def skip_unbounded(model, k, o, d, u, exit_lev, g, s, g_end, table) -> np.ndarray:
     """Next lattice index (> k) after an empty point (no memory reads): the first lattice
     point outside both the empty mip cell and, when G was read, the ball of radius
     ``g / G_res`` (u units) about u, as a walk point by point would find it, but
     jumping in closed form over the points in the shrunk cell or the shrunk cube
     inscribed in the ball (:func:`_box_exit`); the points after a jump are tested one by
-    one until one is outside both or inside a shrunk box again."""
+    one until one is outside both or inside a shrunk box again. ``table``: the rays'
+    :func:`space.lattice_table` rows; ``g_end`` their ``S(t_end)``."""
     cfg = model.config
     res = cfg.L_C >> exit_lev
     cell = _cells(u, res)
@@ -226,13 +236,14 @@ def skip_unbounded(model, k, o, d, u, exit_lev, g, s, g_end) -> np.ndarray:
     walking = np.ones(len(k), bool)
     while walking.any():
         w = np.flatnonzero(walking)
-        t = unwarp(_lattice_g(k[w], s), True)
+        tw = lattice_rows(table, w)
+        t = lattice_t(tw, _lattice_g(k[w], s))
         T = _box_exit(o[w], d[w], t, lo[w], hi[w])
         Tc = _box_exit(o[w], d[w], t, c0[w] - half[w, None], c0[w] + half[w, None])
         T = np.where(cube[w], np.maximum(T, Tc), T)
-        x = np.minimum(warp(T, True) / s - F32(1e-3), lim[w])
+        x = np.minimum(lattice_s(tw, T) / s - F32(1e-3), lim[w])
         k[w] = np.maximum(k[w] + 1, np.ceil(x).astype(np.int64))
-        uk = _point_u(cfg, o[w], d[w], unwarp(_lattice_g(k[w], s), True))
+        uk = _point_u(cfg, o[w], d[w], lattice_t(tw, _lattice_g(k[w], s)))
         same = np.all(_cells(uk, res[w]) == cell[w], axis=1)
         du = uk - u[w]
         dist = np.sqrt(du[:, 0] * du[:, 0] + du[:, 1] * du[:, 1] + du[:, 2] * du[:, 2])
@@ -336,27 +347,30 @@ class _Rays:
         self.n_occ = np.zeros(n, np.int32)
 
 
-def next_t(model, k: np.ndarray, s: F32, g_end: np.ndarray) -> np.ndarray:
+def next_t(model, k: np.ndarray, s: F32, g_end: np.ndarray, table=None) -> np.ndarray:
     """End ``t_{k+1}`` of the interval of lattice point k (world units).
 
-    Unbounded scenes end the last interval at the ray's far end: the lattice reaches g = 2
-    (t = infinity) and ``unwarp`` is undefined beyond, so ``t_{k+1} = unwarp(min((k+1)*s,
-    g_end))``. Bounded scenes use ``(k+1)*s`` as is (it may pass the box, harmlessly).
+    Unbounded scenes end the last interval at the ray's far end: ``t_{k+1} =
+    S^-1((k+1)*s)`` while ``(k+1)*s < g_end = S(far)``, else ``far`` (``table``: the rays'
+    lattice_table rows). Bounded scenes use ``(k+1)*s`` as is (it may pass the box,
+    harmlessly).
     """
     g = _lattice_g(k + 1, s)
     if model.config.scene != "unbounded":
         return g
-    return unwarp(np.minimum(g, g_end), True)
+    t = lattice_t(table, np.minimum(g, g_end))
+    return np.where(g < g_end, t, F32(model.config.far)).astype(F32)
 
 
-def composite(model, st: _Rays, rows, u, t, s, g_end) -> None:
+def composite(model, st: _Rays, rows, u, t, s, g_end, table=None) -> None:
     """Alpha-composite the samples of rays ``rows`` at u (distance t) and step on.
 
-    ``g_end``: (len(rows),) warped end of those rays."""
+    ``g_end``: (len(rows),) lattice end of those rays; ``table``: their lattice_table
+    rows (unbounded)."""
     f = features(model, u)
     k = st.k[rows]
     sigma = np.exp(f[:, 0])
-    delta = next_t(model, k, s, g_end) - t
+    delta = next_t(model, k, s, g_end, table) - t
     alpha = F32(1.0) - np.exp(-sigma * delta)
     T = st.T[rows]
     w = T * alpha
@@ -386,27 +400,35 @@ def march_reference(model, origins: np.ndarray, dirs: np.ndarray, use_G: bool = 
     d = np.ascontiguousarray(dirs, F32).reshape(-1, 3)
     s = F32(model.step)
     t_start, t_end, hit = ray_range(cfg, o, d)
-    g_end = warp(t_end, unbounded)
     st = _Rays(len(o))
-    with np.errstate(invalid="ignore", over="ignore"):
-        st.k[hit] = np.ceil(warp(t_start[hit], unbounded) / s).astype(np.int64)
+    table = None
+    if unbounded:       # S from t_start: k0 = 0 (docs/ngprt.md "Step lattice")
+        table = lattice_table(o, d, t_start, t_end)
+        g_end = lattice_end(table)
+    else:
+        g_end = t_end
+        with np.errstate(invalid="ignore", over="ignore"):
+            st.k[hit] = np.ceil(t_start[hit] / s).astype(np.int64)
     active = hit & (_lattice_g(st.k, s) < g_end)
     with np.errstate(over="ignore"):
         while active.any():
             rows = np.flatnonzero(active)
             st.n_march[rows] += 1
-            t = unwarp(_lattice_g(st.k[rows], s), unbounded)
+            tab = lattice_rows(table, rows) if unbounded else None
+            t = lattice_point(cfg, tab, st.k[rows], s)
             u = _point_u(cfg, o[rows], d[rows], t)
             lev = exit_level(model, u)
             occ = lev < 0
             if occ.any():
-                composite(model, st, rows[occ], u[occ], t[occ], s, g_end[rows[occ]])
+                composite(model, st, rows[occ], u[occ], t[occ], s, g_end[rows[occ]],
+                          lattice_rows(tab, occ) if unbounded else None)
             e = ~occ
             if e.any():
                 r, ue, le = rows[e], u[e], lev[e]
                 g = g_distance(model, ue, le, use_G)
                 if unbounded:
-                    st.k[r] = skip_unbounded(model, st.k[r], o[r], d[r], ue, le, g, s, g_end[r])
+                    st.k[r] = skip_unbounded(model, st.k[r], o[r], d[r], ue, le, g, s, g_end[r],
+                                             lattice_rows(tab, e))
                 else:
                     st.k[r] = skip_bounded(model, st.k[r], t[e], o[r], d[r], ue, le, g, s,
                                            g_end[r])

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import torch
 
+from .config import LATTICE_BREAKS
 from .encoding import HASH_PRIMES
 
 # The 8 corner offsets of a cell, corner c = (c >> 2 & 1, c >> 1 & 1, c & 1) (x slowest).
@@ -33,18 +34,60 @@ def contract(x: torch.Tensor) -> torch.Tensor:
     return torch.where(m <= 1.0, x, torch.where(ax == m, scaled, s))
 
 
-def warp(t: torch.Tensor, unbounded: bool) -> torch.Tensor:
-    """Warped distance g(t) (``space.warp``); identity for bounded scenes."""
-    if not unbounded:
-        return t
-    return torch.where(t <= 1.0, t, 2.0 - 1.0 / torch.clamp(t, min=1.0))
+def lattice_table(o: torch.Tensor, d: torch.Tensor, t_start: torch.Tensor,
+                  t_end: torch.Tensor):
+    """Pieces of the contracted arc length S(t) of unbounded rays (``space.lattice_table``,
+    the same float32 operations): (brk (N, 14), cum (N, 14), A, B, K (N, 13))."""
+    cand = []
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        cand.append((o[:, j] - o[:, i]) / (d[:, i] - d[:, j]))
+        cand.append(-(o[:, i] + o[:, j]) / (d[:, i] + d[:, j]))
+    for i in range(3):
+        cand.append((1.0 - o[:, i]) / d[:, i])
+        cand.append((-1.0 - o[:, i]) / d[:, i])
+    c = torch.stack(cand, 1)
+    keep = (c > t_start[:, None]) & (c < t_end[:, None])
+    c = torch.sort(torch.where(keep, c, t_end[:, None].expand_as(c)), dim=1).values
+    brk = torch.cat([t_start[:, None], c, t_end[:, None]], 1)
+    ta, tb = brk[:, :-1], brk[:, 1:]
+    tm = ta + (tb - ta) * 0.5
+    xm = o[:, None, :] + tm[..., None] * d[:, None, :]
+    am = xm.abs()
+    mm = torch.maximum(torch.maximum(am[..., 0], am[..., 1]), am[..., 2])
+    a = torch.where(am[..., 0] == mm, 0, torch.where(am[..., 1] == mm, 1, 2))[..., None]
+    xa = torch.gather(xm, 2, a)[..., 0]
+    sg = torch.where(xa > 0, 1.0, -1.0).to(o.dtype)
+    p = o[:, None, :] + ta[..., None] * d[:, None, :]
+    ma = sg * torch.gather(p, 2, a)[..., 0]
+    b = sg * torch.gather(d[:, None, :].expand_as(p), 2, a)[..., 0]
+    e = d[:, None, :] * ma[..., None] - p * b[..., None]
+    # float32 sqrt, correctly rounded (torch's CPU float32 sqrt is not, measured): in
+    # float64, then rounded once to float32, which is exact for sqrt.
+    K2 = e[..., 0] * e[..., 0] + e[..., 1] * e[..., 1] + e[..., 2] * e[..., 2] + b * b
+    K = torch.sqrt(K2.double()).to(o.dtype)
+    inner = mm <= 1.0
+    one, zero = torch.ones_like(ma), torch.zeros_like(ma)
+    A = torch.where(inner, one, ma * ma)
+    B = torch.where(inner, zero, ma * b)
+    K = torch.where(inner, one, K)
+    tau = tb - ta
+    length = K * tau / (A + B * tau)
+    cum = [torch.zeros_like(t_start)]
+    for q in range(LATTICE_BREAKS - 1):
+        cum.append(cum[-1] + length[:, q])
+    return brk, torch.stack(cum, 1), A, B, K
 
 
-def unwarp(g: torch.Tensor, unbounded: bool) -> torch.Tensor:
-    """Inverse of :func:`warp` (``space.unwarp``): distance t for warped distance g < 2."""
-    if not unbounded:
-        return g
-    return torch.where(g <= 1.0, g, 1.0 / (2.0 - torch.clamp(g, min=1.0)))
+def lattice_t(table, sigma: torch.Tensor) -> torch.Tensor:
+    """``S^-1(sigma)`` per ray (``space.lattice_t``)."""
+    brk, cum, A, B, K = table
+    j = (cum[:, 1:LATTICE_BREAKS - 1] <= sigma[:, None]).sum(1)[:, None]
+    pick = lambda x: torch.gather(x, 1, j)[:, 0]   # noqa: E731
+    t_b = torch.gather(brk, 1, j + 1)[:, 0]
+    r = sigma - pick(cum)
+    den = pick(K) - pick(B) * r
+    t = torch.minimum(pick(brk) + pick(A) * r / den, t_b)
+    return torch.where(den > 0, t, t_b)
 
 
 def ray_box(origins: torch.Tensor, dirs: torch.Tensor, extent: float = 1.0):
@@ -133,12 +176,14 @@ def trilinear_corners(p: torch.Tensor, base: torch.Tensor | None = None):
 
 def lattice_samples(origins: torch.Tensor, dirs: torch.Tensor, occupancy: torch.Tensor,
                     s: float, near: float, far: float, extent: float, unbounded: bool):
-    """The lattice points ``t_k = unwarp(k * s)`` of each ray that fall in occupied cells.
+    """The lattice points of each ray that fall in occupied cells (docs/ngprt.md "Step
+    lattice"): ``t_k = k * s`` (bounded) or ``S^-1(k * s)`` (unbounded, S the contracted
+    arc length from ``near``, :func:`lattice_table`).
 
     Args:
         origins, dirs: (R, 3) float32 rays (unit directions).
         occupancy: (L_C, L_C, L_C) bool grid; a point is kept when its cell is True.
-        s: lattice step in warped distance (``gamma * s0``).
+        s: lattice step (``gamma * s0``), world (bounded) or contracted (unbounded) units.
         near, far, extent, unbounded: from the ModelConfig.
     Returns:
         ray_ids: (M,) int64, non-decreasing; samples of a ray are in marching order.
@@ -152,11 +197,14 @@ def lattice_samples(origins: torch.Tensor, dirs: torch.Tensor, occupancy: torch.
     if unbounded:
         t_start = torch.full_like(origins[:, 0], near)
         t_end = torch.full_like(origins[:, 0], far)
+        table = lattice_table(origins, dirs, t_start, t_end)
+        g_end = table[1][:, LATTICE_BREAKS - 1]
+        k0 = torch.zeros_like(g_end)
     else:
         t_in, t_end = ray_box(origins, dirs, extent)
         t_start = torch.clamp(t_in, min=near)
-    g_end = warp(t_end, unbounded)
-    k0 = torch.ceil(warp(t_start, unbounded) / s_t)
+        g_end = t_end
+        k0 = torch.ceil(t_start / s_t)
     n = torch.clamp(torch.ceil(g_end / s_t) - k0 + 1, min=0)
     n = torch.nan_to_num(n, nan=0.0).to(torch.int64)
     k0 = torch.nan_to_num(k0, nan=0.0).to(torch.int64)
@@ -166,15 +214,19 @@ def lattice_samples(origins: torch.Tensor, dirs: torch.Tensor, occupancy: torch.
     g = k.to(torch.float32) * s_t
     keep = g < g_end[ray_ids]
     ray_ids, k, g = ray_ids[keep], k[keep], g[keep]
-    t = unwarp(g, unbounded)
+    t = lattice_t(tuple(x[ray_ids] for x in table), g) if unbounded else g
     u = to_grid(origins[ray_ids] + t[:, None] * dirs[ray_ids], extent, unbounded)
     cell = cell_index(u, R)
     keep = occupancy[cell[:, 0], cell[:, 1], cell[:, 2]]
     ray_ids, k, t, u = ray_ids[keep], k[keep], t[keep], u[keep]
     g_next = (k + 1).to(torch.float32) * s_t
-    if unbounded:   # the last interval ends at the ray's end (unwarp is undefined at 2)
-        g_next = torch.minimum(g_next, g_end[ray_ids])
-    delta = unwarp(g_next, unbounded) - t
+    if unbounded:   # the last interval ends at the ray's end
+        end = g_end[ray_ids]
+        t_next = lattice_t(tuple(x[ray_ids] for x in table), torch.minimum(g_next, end))
+        t_next = torch.where(g_next < end, t_next, t_end[ray_ids])
+    else:
+        t_next = g_next
+    delta = t_next - t
     return ray_ids, k, t, delta, u
 
 
@@ -209,14 +261,32 @@ def accumulate(values: torch.Tensor, ray_ids: torch.Tensor, n_rays: int) -> torc
     return out.index_add_(0, ray_ids, values)
 
 
-def distortion_loss(w: torch.Tensor, k: torch.Tensor, s: float, ray_ids: torch.Tensor,
-                    n_rays: int) -> torch.Tensor:
-    """Mip-NeRF 360 distortion loss (S2.2, Eq. S2) per ray (n_rays,), on the lattice: the
-    interval of sample k is ``[k*s, (k+1)*s]`` in warped distance (world t when bounded)."""
-    m = (k.to(w.dtype) + 0.5) * s
+def distortion_intervals(k: torch.Tensor, t: torch.Tensor, delta: torch.Tensor, s: float,
+                         unbounded: bool):
+    """(lo, hi) (M,) of each sample's interval in the distortion loss's normalised distance:
+    the lattice's ``[k*s, (k+1)*s]`` when bounded; when unbounded mip-NeRF 360's warp of
+    the camera distance, ``g(t) = t`` for t <= 1 and ``2 - 1/t`` beyond, of
+    ``[t, t + delta]`` (the lattice's contracted arc length would weigh far intervals ~10x
+    more and keep the training occupancy from pruning)."""
+    if not unbounded:
+        lo = k.to(t.dtype) * s
+        return lo, lo + s
+
+    def g(x):
+        return torch.where(x <= 1.0, x, 2.0 - 1.0 / torch.clamp(x, min=1.0))
+
+    return g(t), g(t + delta)
+
+
+def distortion_loss(w: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
+                    ray_ids: torch.Tensor, n_rays: int) -> torch.Tensor:
+    """Mip-NeRF 360 distortion loss (S2.2, Eq. S2) per ray (n_rays,) of packed samples with
+    weights w and intervals [lo, hi] (M,) (:func:`distortion_intervals`), samples of a ray
+    in marching order."""
+    m = 0.5 * (lo + hi)
     W = _segment_exclusive_cumsum(w, ray_ids, n_rays).to(w.dtype)
     S = _segment_exclusive_cumsum(w * m, ray_ids, n_rays).to(w.dtype)
-    per_sample = 2.0 * w * (m * W - S) + (s / 3.0) * w * w
+    per_sample = 2.0 * w * (m * W - S) + (hi - lo) / 3.0 * w * w
     return accumulate(per_sample, ray_ids, n_rays)
 
 

@@ -109,11 +109,20 @@ class OccupancyGrid:
         self.binary = torch.ones((self.R,) * 3, dtype=torch.bool, device=device)
 
     def _step_scale(self, u: torch.Tensor) -> torch.Tensor:
-        """World length of a unit of warped distance at u (1 inside the unit ball/box)."""
+        """Largest world length of a unit of lattice distance at u, over directions (1
+        inside the unit cube). The unbounded lattice is uniform in contracted space
+        (docs/ngprt.md "Step lattice"); outside the cube, with ``m = |x|_inf`` and ``c_b``
+        the other two contracted coordinates, a contracted step dc is longest in world
+        space along the ray through the origin: ``|dx| = m^2 sqrt(1 + c_b^2 + c_b'^2) |dc|``,
+        ``m = 1 / (2 - |c|_inf)``."""
         if self.cfg.scene == "bounded":
             return torch.ones_like(u[:, 0])
-        m = (u * 2 * self.cfg.extent - self.cfg.extent).abs().amax(-1)
-        return torch.clamp(1.0 / torch.clamp(2.0 - m, min=1e-2) ** 2, max=1e4)
+        c = u * 2 * self.cfg.extent - self.cfg.extent
+        mc = c.abs().amax(-1)
+        m = 1.0 / torch.clamp(2.0 - mc, min=1e-2)
+        rest = torch.clamp((c * c).sum(-1) - mc * mc, min=0.0)
+        scale = m * m * torch.sqrt(1.0 + rest)
+        return torch.where(mc <= 1.0, torch.ones_like(mc), torch.clamp(scale, max=1e4))
 
     @torch.no_grad()
     def update(self, model: NGPRT, step: int, warmup: int, fraction: float, decay: float,
@@ -294,7 +303,9 @@ def _loop(model, opt, occ, gamma, start, sampler, tcfg, out, progress, on_step=N
             o, d, target, bg = sampler.sample(n_rays)
             r = render_rays(model, o, d, occ.binary, gamma, bg)
             s = float(torch.tensor(gamma * model.cfg.s0, dtype=torch.float32))
-            dist = ops.distortion_loss(r["weights"], r["k"], s, r["ray_ids"], n_rays)
+            lo, hi = ops.distortion_intervals(r["k"], r["t"], r["delta"], s,
+                                              model.cfg.scene == "unbounded")
+            dist = ops.distortion_loss(r["weights"], lo, hi, r["ray_ids"], n_rays)
             colour = F.huber_loss(r["rgb"], target, delta=tcfg.huber_delta)
             loss = colour + eta * dist.mean()
             opt.zero_grad(set_to_none=True)
