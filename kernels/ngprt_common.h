@@ -46,19 +46,7 @@
 #if FEATURES != 8
 #error "FEATURES must be 8: features are held in float8"
 #endif
-#if !defined(FAST_MATH)
-#error "ngprt kernels need -D FAST_MATH=0 or 1 (render_cl.kernel_defines)"
-#endif
-
-/* exp and 1/x: the library's (a few ulps, as numpy's) in the exact build, the device's
- * native ones in the fast build. */
-#if FAST_MATH
-#define NGP_EXP(x) native_exp(x)
-#define NGP_RECIP(x) native_recip(x)
-#else
-#define NGP_EXP(x) exp(x)
-#define NGP_RECIP(x) (1.0f / (x))
-#endif
+#include "ngprt_math.h"
 #if FUSION_HIDDEN % 8 != 0
 #error "FUSION_HIDDEN must be a multiple of 8"
 #endif

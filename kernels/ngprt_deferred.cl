@@ -17,6 +17,7 @@
  * params: [w0 (23, 64), b0 (64), w1 (64, 64), b1 (64), w2 (64, 3), b2 (3)] float32.
  */
 #include "camera.h"
+#include "ngprt_math.h"
 #pragma OPENCL FP_CONTRACT OFF
 
 #if !defined(FEATURES) || !defined(SH_DIM) || !defined(DEFERRED_HIDDEN) || \
@@ -38,13 +39,6 @@
 #define N_FEAT (FEATURES - 1)              /* diffuse rgb (3) + specular (4) */
 #define IN (N_FEAT + SH_DIM)
 #define HID DEFERRED_HIDDEN
-#if FAST_MATH
-#define NGP_EXP(x) native_exp(x)
-#define NGP_RECIP(x) native_recip(x)
-#else
-#define NGP_EXP(x) exp(x)
-#define NGP_RECIP(x) (1.0f / (x))
-#endif
 #define P_W0 0
 #define P_B0 (P_W0 + IN * HID)
 #define P_W1 (P_B0 + HID)
