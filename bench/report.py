@@ -71,10 +71,12 @@ def _ours(col: str, m: dict, n_seeds: int) -> str:
 
 
 def effects(table, results: list[dict]) -> list[dict | None]:
-    """Per row against its baseline over seeds (results from :func:`bench.seeds.aggregate`,
-    two or more seeds): {mean, std} of the paired PSNR differences (dB, row minus baseline,
-    same seed), ``paper`` (the paper's difference, None where it lacks a PSNR) and
-    ``verdict``; None for rows without a baseline and for the baseline itself."""
+    """Per row against its baseline over seeds (results from :func:`bench.seeds.aggregate`):
+    {mean, std} of the paired PSNR differences (dB, row minus baseline, same seed),
+    ``paper`` (the paper's difference, None where it lacks a PSNR) and ``verdict``; None
+    for rows without a baseline, for the baseline itself, and for every row of one seed."""
+    if _n_seeds(results) < 2:
+        return [None] * len(results)
     psnr = {row.name: [p["PSNR"] for p in m["per_seed"]] for row, m in zip(table.rows, results)}
     paper_psnr = {row.name: row.paper.get("PSNR") for row in table.rows}
     out = []
@@ -103,17 +105,17 @@ def _head(table, extra: list[str], n_seeds: int) -> list[str]:
         + ["Size (MB)", "Train (min)"]
 
 
-def markdown(table, results: list[dict], meta: dict) -> str:
+def markdown(table, results: list[dict], meta: dict, deltas: list[dict | None]) -> str:
     """The table with each paper column as "ours" and "paper" sub-columns; with several
     seeds (results from :func:`bench.seeds.aggregate`) ours are "mean ± std" and rows with
-    a baseline say whether the paper's PSNR difference reproduces."""
+    a baseline say whether the paper's PSNR difference reproduces (``deltas``, from
+    :func:`effects`)."""
     n = _n_seeds(results)
     extra = [c for c in _stat_columns(results) if c not in table.paper_columns]
     head = _head(table, extra, n)
     ratios = any(r.baseline for r in table.rows)
     ours_x = speedups(table, results)
     paper_x = speedups(table, results, key=lambda row, m: row.paper.get("Time (ms)"))
-    deltas = effects(table, results) if ratios and n > 1 else [None] * len(results)
     lines = [f"## {table.title}", "",
              f"Ours: {meta['scene']} scene, `{meta['preset']}` preset, {meta['device']}, "
              f"test views at {meta['resolution']}. Paper: {table.paper_source}.", "",
@@ -257,10 +259,10 @@ def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
     (JSON rows then carry ``seeds``, ``per_seed``, ``spread``, ``delta_PSNR``; the CSV
     ``PSNR_std`` and ``SSIM_std``).
     """
-    md = markdown(table, results, meta)
+    deltas = effects(table, results)
+    md = markdown(table, results, meta, deltas)
     write_atomic(out_dir / f"{table.key}.md", md)
     n, stats = _n_seeds(results), _stat_columns(results)
-    deltas = effects(table, results) if n > 1 else [None] * len(results)
     records = []
     for row, m, ox, d in zip(table.rows, results, speedups(table, results), deltas):
         sample = out_dir / table.key / f"{slug(row.name)}.png"

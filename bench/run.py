@@ -78,7 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("table", nargs="?", default="table4",
                    help=f"a table name, `all`, or `{train_curve.KEY}`")
     p.add_argument("--list", action="store_true", help="list the tables and exit")
-    p.add_argument("--preset", choices=methods.all_presets(), action="append", default=None,
+    p.add_argument("--preset", dest="presets", choices=methods.all_presets(), action="append",
+                   default=None,
                    help="model/training preset (default: the table's, `cpu`); "
                         f"{train_curve.KEY} takes it more than once "
                         f"(default: {' and '.join(train_curve.PRESETS)})")
@@ -108,9 +109,9 @@ def main(argv=None) -> int:
         curve = args.table == train_curve.KEY
         keys = [] if curve else ablation.list_tables() if args.table == "all" else [args.table]
         tables = [ablation.load_table(k) for k in keys]
-        if not curve and len(args.preset or ()) > 1:
-            raise ValueError(f"a table takes one --preset, got {', '.join(args.preset)}")
-        args.preset = args.preset if curve else (args.preset or [None])[0]
+        if not curve and len(args.presets or ()) > 1:
+            raise ValueError(f"a table takes one --preset, got {', '.join(args.presets)}")
+        args.preset = None if curve else (args.presets or [None])[0]
         args.cache = args.cache or cache.cache_root()
         from clrender.device import get_runtime
 

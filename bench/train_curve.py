@@ -187,7 +187,7 @@ def run(args, meta: dict) -> str:
     fingerprint = cache.data_fingerprint(data)
     meta = {**meta, "scene": scene}
     points, text = [], ""
-    for preset in args.preset or PRESETS:
+    for preset in args.presets or PRESETS:
         points += measure_curve(args.cache, data, fingerprint, preset, seed=args.seed,
                                 device=args.device, torch_device=args.torch_device)
         text = write_curve(args.out, points, meta)

@@ -53,10 +53,12 @@ def test_write_table_puts_paper_figures_beside_ours(tmp_path):
 def test_lpips_is_reported_beside_the_paper_or_as_not_measured(tmp_path):
     t = ablation.load_table("table2")
     meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4"}
-    md = report.markdown(t, [_measured(25.0, 5.0)] * 3, meta)
+    results = [_measured(25.0, 5.0)] * 3
+    md = report.markdown(t, results, meta, report.effects(t, results))
     row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
     assert "| n/a | 0.299 |" in row and "LPIPS: n/a where its weights" in md
-    md = report.markdown(t, [{**_measured(25.0, 5.0), "LPIPS": 0.2}] * 3, meta)
+    results = [{**_measured(25.0, 5.0), "LPIPS": 0.2}] * 3
+    md = report.markdown(t, results, meta, report.effects(t, results))
     row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
     assert "| 0.200 | 0.299 |" in row and "LPIPS: AlexNet, linear heads v0.1" in md
 

@@ -12,7 +12,7 @@ from bench import run, train_curve
 
 def test_argparse_accepts_train_curve_and_repeated_presets(tmp_path, capsys):
     args = run.build_parser().parse_args(["train-curve", "--preset", "cpu", "--preset", "tiny"])
-    assert args.table == "train-curve" and args.preset == ["cpu", "tiny"]
+    assert args.table == "train-curve" and args.presets == ["cpu", "tiny"]
     assert run.main(["table4", "--preset", "cpu", "--preset", "tiny", "--cache",
                      str(tmp_path)]) == 2
     assert "a table takes one --preset" in capsys.readouterr().err
