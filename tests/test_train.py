@@ -10,6 +10,7 @@ import torch
 from clrender.ngprt import encoding, space
 from clrender.ngprt import torch_ops as ops
 from clrender.ngprt.config import T_STOP, preset
+from clrender.ngprt.model import NGPRT
 
 RNG = np.random.default_rng(7)
 
@@ -64,7 +65,6 @@ def test_sh4_matches_numpy():
 
 def test_fine_lookup_matches_contract():
     """docs/ngprt.md "Fine level l": trilinear over hashed corners of R_l = L_C * 2^(l+1)."""
-    from clrender.ngprt.model import NGPRT
 
     cfg = preset("tiny", L=3)
     model = NGPRT(cfg)
@@ -91,6 +91,26 @@ def test_grid_lookup_gradient():
     u = torch.rand(40, 3, dtype=torch.float64)
     assert torch.autograd.gradcheck(
         lambda t: ops.grid_lookup(t, u, [3, 5, 9], [True, False, False]), (tab,))
+
+
+def test_grid_lookup_on_vertices_is_trilinear_at_vertices():
+    """Levels read at their vertices (the auxiliary NGP's L_C level at the L_C corners):
+    one row each gives the trilinear features and table gradients exactly."""
+    R_c = 16
+    tab = torch.randn(4, 1 << 10, 4, requires_grad=True)
+    ijk = torch.randint(0, R_c + 1, (300, 3))
+    u = ijk.to(torch.float32) / R_c
+    res, dense = [4, 8, 16, 32], [True, False, False, False]
+    tri = ops.grid_lookup(tab, u, res, dense)
+    g = torch.randn_like(tri)
+    (grad_tri,) = torch.autograd.grad(tri, tab, g)
+    vert = ops.grid_lookup(tab, u, res, dense, on_vertices=2)
+    (grad_vert,) = torch.autograd.grad(vert, tab, g)
+    assert torch.equal(vert, tri) and torch.equal(grad_vert, grad_tri)
+    dense_tab = torch.randn(2, 200, 3, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda t: ops.grid_lookup(
+        t, ijk[:20].double() / R_c, [2, 4], [True, True], on_vertices=1), (dense_tab,))
+    assert NGPRT(preset("cpu")).aux.on_vertices == 1          # the level at L_C itself
 
 
 # -- lattice and compositing against loops over the contract ------------------------------
@@ -318,7 +338,6 @@ def test_on_step_hook_fires_after_every_step_and_changes_nothing(tmp_path, one_t
     checkpoint is bit-identical to one trained without the hook (one torch thread; a hook
     drawing one random number moves every later batch, 2e-2)."""
     from clrender.data import make_scene
-    from clrender.ngprt.model import NGPRT
     from clrender.ngprt.train import OccupancyGrid, train
 
     data = make_scene("bounded", tmp_path / "scene", seed=0, n_train=6, n_test=1, width=24,

@@ -50,7 +50,9 @@ class AuxNGP(nn.Module):
     """Auxiliary multi-resolution hash encoding + one-hidden-layer MLP (S2.1).
 
     ``aux_levels`` levels from ``aux_min_res`` to ``L_C`` (geometric), ``aux_features``
-    features each; a level whose dense grid fits the table is indexed densely.
+    features each; a level whose dense grid fits the table is indexed densely. It is only
+    evaluated at the corners of the L_C grid, which are vertices of the levels whose
+    resolution is a multiple of L_C (the finest, L_C itself): those read one table row.
     """
 
     def __init__(self, cfg: ModelConfig):
@@ -60,17 +62,22 @@ class AuxNGP(nn.Module):
         self.resolutions = [int(round(cfg.aux_min_res * growth ** l)) for l in range(n)]
         self.T = 1 << cfg.aux_log2_T
         self.dense = [(R + 1) ** 3 <= self.T for R in self.resolutions]
+        self.on_vertices = 0          # trailing levels with the L_C corners as vertices
+        while self.on_vertices < n and self.resolutions[-1 - self.on_vertices] % cfg.L_C == 0:
+            self.on_vertices += 1
         self.tables = _uniform((n, self.T, cfg.aux_features), 1e-4)
         self.w0, self.b0 = _linear(n * cfg.aux_features, cfg.aux_hidden)
         self.w1, self.b1 = _linear(cfg.aux_hidden, cfg.coarse_channels)
 
     def encode(self, u: torch.Tensor) -> torch.Tensor:
-        """(N, levels * features) hash features at grid coordinates u (N, 3)."""
-        f = ops.grid_lookup(self.tables, u, self.resolutions, self.dense)
+        """(N, levels * features) hash features at grid coordinates u (N, 3) of L_C-grid
+        corners (``corner / L_C``)."""
+        f = ops.grid_lookup(self.tables, u, self.resolutions, self.dense, self.on_vertices)
         return f.reshape(len(u), f.shape[1] * f.shape[2])
 
     def forward(self, u: torch.Tensor) -> torch.Tensor:
-        """(N, 8 + n_attention) raw coarse channels at grid coordinates u (N, 3)."""
+        """(N, 8 + n_attention) raw coarse channels at grid coordinates u (N, 3) of L_C-grid
+        corners."""
         h = torch.relu(self.encode(u) @ self.w0 + self.b0)
         return h @ self.w1 + self.b1
 

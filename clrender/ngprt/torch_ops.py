@@ -308,11 +308,14 @@ class _WeightedGather(torch.autograd.Function):
         idx, w = ctx.saved_tensors
         n_rows, n_feat = ctx.shape
         flat = idx.reshape(-1)
-        gw = (w[..., None] * g[:, None, :]).reshape(-1, n_feat)
         if g.device.type == "cpu":
-            grad = torch.stack([torch.bincount(flat, gw[:, c], minlength=n_rows)
+            # One contiguous (N * J,) weight vector per feature: the broadcast (N, J, F)
+            # product and its strided columns took twice as long (auxiliary NGP, F = 4).
+            grad = torch.stack([torch.bincount(flat, (w * g[:, c, None]).reshape(-1),
+                                               minlength=n_rows)
                                 for c in range(n_feat)], 1).to(g.dtype)
         else:
+            gw = (w[..., None] * g[:, None, :]).reshape(-1, n_feat)
             grad = torch.zeros(ctx.shape, dtype=g.dtype, device=g.device).index_add_(0, flat, gw)
         return grad, None, None
 
@@ -323,13 +326,14 @@ def weighted_gather(table: torch.Tensor, idx: torch.Tensor, w: torch.Tensor) -> 
     return _WeightedGather.apply(table, idx, w)
 
 
-def _level_indices(base: torch.Tensor, res, T: int, dense: bool) -> torch.Tensor:
-    """(N, lev, 8) table rows of the corners ``base + c`` of a group of levels.
+def _level_indices(base: torch.Tensor, res, T: int, dense: bool, corners: int = 2) -> torch.Tensor:
+    """(N, lev, corners^3) table rows of the corners ``base + c`` (c in {0, .., corners-1}^3)
+    of a group of levels: the 8 of a cell, or with ``corners=1`` the vertex ``base`` itself.
 
-    Built per axis at (N, lev, 2) and combined by broadcasting, so only a few passes touch
-    the full (N, lev, 8) size (these passes dominate the training time on CPU).
+    Built per axis at (N, lev, corners) and combined by broadcasting, so only a few passes
+    touch the full (N, lev, 8) size (these passes dominate the training time on CPU).
     """
-    c = base[..., None] + torch.arange(2, device=base.device)        # (N, lev, 3, 2)
+    c = base[..., None] + torch.arange(corners, device=base.device)  # (N, lev, 3, corners)
     if dense:
         r1 = torch.tensor([int(r) + 1 for r in res], device=base.device)[None, :, None]
         c = torch.minimum(torch.clamp(c, min=0), r1[..., None] - 1)
@@ -340,7 +344,21 @@ def _level_indices(base: torch.Tensor, res, T: int, dense: bool) -> torch.Tensor
     return (h & (T - 1)).flatten(2)
 
 
-def grid_lookup(tables: torch.Tensor, u: torch.Tensor, resolutions, dense=None) -> torch.Tensor:
+def _group_indices(base: torch.Tensor, resolutions, dense, T: int, corners: int) -> torch.Tensor:
+    """(N, lev, corners^3) rows of :func:`_level_indices` for levels whose dense ones come
+    first, offset by ``level * T`` within the group."""
+    n_dense, n_lev = sum(dense), len(dense)
+    parts = []
+    if n_dense:
+        parts.append(_level_indices(base[:, :n_dense], resolutions[:n_dense], T, True, corners))
+    if n_dense < n_lev:
+        parts.append(_level_indices(base[:, n_dense:], resolutions[n_dense:], T, False, corners))
+    idx = torch.cat(parts, 1) if len(parts) > 1 else parts[0]
+    return idx + (torch.arange(n_lev, device=base.device) * T)[None, :, None]
+
+
+def grid_lookup(tables: torch.Tensor, u: torch.Tensor, resolutions, dense=None,
+                on_vertices: int = 0) -> torch.Tensor:
     """Trilinear multi-level grid features at grid coordinates u.
 
     Args:
@@ -350,6 +368,10 @@ def grid_lookup(tables: torch.Tensor, u: torch.Tensor, resolutions, dense=None) 
             + c`` hashed with :func:`hash_corner` into [0, T) (docs/ngprt.md "Fine level").
         dense: optional n_levels bools; a True level (they must come first) indexes its
             ``(R+1)^3`` corners densely instead (auxiliary NGP levels that fit the table).
+        on_vertices: the number of last levels at whose vertices every u lies (``u * R_l``
+            integral, as the auxiliary NGP's L_C level at the L_C corners): each reads the
+            one row of its vertex, where trilinear reads 8 of which 7 weigh exactly 0
+            (the same features and gradients, an eighth of the gather).
     Returns:
         (N, n_levels, F) features.
     """
@@ -363,16 +385,19 @@ def grid_lookup(tables: torch.Tensor, u: torch.Tensor, resolutions, dense=None) 
     base = torch.floor(p)
     w1 = p - base
     base = base.to(torch.int64)
-    parts = []
-    if n_dense:
-        parts.append(_level_indices(base[:, :n_dense], resolutions[:n_dense], T, True))
-    if n_dense < n_lev:
-        parts.append(_level_indices(base[:, n_dense:], resolutions[n_dense:], T, False))
-    idx = torch.cat(parts, 1) if len(parts) > 1 else parts[0]
-    idx = idx + (torch.arange(n_lev, device=u.device) * T)[None, :, None]
-    wx = torch.stack([1.0 - w1, w1], -1)                             # (N, lev, 3, 2)
-    w = (wx[:, :, 0, :, None, None] * wx[:, :, 1, None, :, None]
-         * wx[:, :, 2, None, None, :]).flatten(2)                    # (N, lev, 8)
-    out = weighted_gather(tables.reshape(n_lev * T, n_feat), idx.reshape(-1, 8),
-                          w.reshape(-1, 8))
-    return out.reshape(len(u), n_lev, n_feat)
+    flat = tables.reshape(n_lev * T, n_feat)
+    m = n_lev - on_vertices                                         # trilinear levels
+    out = []
+    if m:
+        idx = _group_indices(base[:, :m], resolutions[:m], dense[:m], T, 2)
+        wx = torch.stack([1.0 - w1[:, :m], w1[:, :m]], -1)          # (N, m, 3, 2)
+        w = (wx[:, :, 0, :, None, None] * wx[:, :, 1, None, :, None]
+             * wx[:, :, 2, None, None, :]).flatten(2)                # (N, m, 8)
+        out.append(weighted_gather(flat, idx.reshape(-1, 8), w.reshape(-1, 8))
+                   .reshape(len(u), m, n_feat))
+    if on_vertices:
+        idx = _group_indices(base[:, m:], resolutions[m:], dense[m:], T, 1) + m * T
+        ones = torch.ones(idx.numel(), 1, dtype=u.dtype, device=u.device)
+        out.append(weighted_gather(flat, idx.reshape(-1, 1), ones)
+                   .reshape(len(u), on_vertices, n_feat))
+    return torch.cat(out, 1) if len(out) > 1 else out[0]
