@@ -326,12 +326,13 @@ def weighted_gather(table: torch.Tensor, idx: torch.Tensor, w: torch.Tensor) -> 
     return _WeightedGather.apply(table, idx, w)
 
 
-def _level_indices(base: torch.Tensor, res, T: int, dense: bool, corners: int = 2) -> torch.Tensor:
+def _level_indices(base: torch.Tensor, res, T: int, dense: bool,
+                   corners: int = 2) -> torch.Tensor:
     """(N, lev, corners^3) table rows of the corners ``base + c`` (c in {0, .., corners-1}^3)
     of a group of levels: the 8 of a cell, or with ``corners=1`` the vertex ``base`` itself.
 
     Built per axis at (N, lev, corners) and combined by broadcasting, so only a few passes
-    touch the full (N, lev, 8) size (these passes dominate the training time on CPU).
+    touch the full (N, lev, corners^3) size (these passes dominate the training time on CPU).
     """
     c = base[..., None] + torch.arange(corners, device=base.device)  # (N, lev, 3, corners)
     if dense:
@@ -380,6 +381,8 @@ def grid_lookup(tables: torch.Tensor, u: torch.Tensor, resolutions, dense=None,
     n_dense = sum(dense)
     if dense != [True] * n_dense + [False] * (n_lev - n_dense):
         raise ValueError(f"grid_lookup: dense levels must come first, got {dense}")
+    if not 0 <= on_vertices <= n_lev:
+        raise ValueError(f"grid_lookup: on_vertices={on_vertices} must be in [0, {n_lev}]")
     res = torch.tensor([float(r) for r in resolutions], device=u.device)
     p = u[:, None, :] * res[None, :, None]                          # (N, lev, 3)
     base = torch.floor(p)

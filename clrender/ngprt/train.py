@@ -78,7 +78,7 @@ TRAIN_PRESETS: dict[str, TrainConfig] = {
     "paper": TrainConfig(),
     # Short runs visit each cell far fewer times than 100k iterations would, so the
     # occupancy EMA decays faster to prune empty space within the run. An update of the
-    # cpu preset's 128^3 grid costs ~2.5 s (its 129^3 coarse corners, a quarter of the
+    # cpu preset's 128^3 grid costs ~2 s (its 129^3 coarse corners, a quarter of the
     # cells at random and as many occupied ones), so it runs every 64 steps; 0.36 = 0.6^2
     # keeps the decay per step of the former update every 32.
     "cpu": TrainConfig(iterations=1000, max_rays=4096, target_samples=1 << 14, occ_every=64,
