@@ -223,7 +223,7 @@ def _size_problems(c: ModelConfig) -> list[str]:
 PRESETS: dict[str, ModelConfig] = {
     # The paper's sizes (S2.1, S2.5).
     "paper": ModelConfig(L_C=512, log2_T=22, G_res=256, aux_log2_T=21),
-    # Trains the built-in bounded scene on 2 CPU cores in about 4 minutes (L = 2). L_C sets
+    # Trains the built-in bounded scene on 2 CPU cores in about 3 minutes (L = 2). L_C sets
     # the lattice step s0 = 2*sqrt(3)/L_C: at L_C = 64 the step (0.054, about 5 pixels of
     # a 200x200 view) blurred fine texture and thin twigs; L_C = 128 halves it: +1.06 dB
     # test PSNR at the same training minutes (measured; but -0.45 dB on the built-in
