@@ -31,10 +31,11 @@ def cache_root() -> Path:
 
 
 def resolve_scene(scene: str, root: Path) -> Path:
-    """A dataset folder for ``scene``: a built-in name (generated once) or a path."""
+    """A dataset folder for ``scene``: a built-in name (generated once, again when the
+    generator changed) or a path."""
     if scene in BUILTIN_SCENES:
         path = root / "scenes" / f"{scene}-seed0"
-        if not (path / "transforms_train.json").is_file():
+        if not _is_current(path, BUILTIN_SCENES[scene]):
             from clrender.data import make_scene
 
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -48,6 +49,17 @@ def resolve_scene(scene: str, root: Path) -> Path:
         raise ValueError(f"--scene {scene!r}: neither a built-in scene "
                          f"({', '.join(BUILTIN_SCENES)}) nor a dataset folder")
     return path
+
+
+def _is_current(path: Path, kind: str) -> bool:
+    """Whether ``path`` holds the built-in ``kind`` scene as today's generator makes it."""
+    from clrender.data.scene import scene_key
+
+    try:
+        meta = json.loads((path / "transforms_train.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(meta, dict) and meta.get("clrender") == scene_key(kind, 0)
 
 
 def data_fingerprint(path: Path) -> str:

@@ -1,6 +1,7 @@
 """Baked NGP-RT file: round trip, rejection of malformed files, occupancy structures."""
 import itertools
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -53,6 +54,15 @@ def test_round_trip(model, tmp_path):
     for name, a in model.arrays.items():
         assert back.arrays[name].dtype == a.dtype and np.array_equal(back.arrays[name], a), name
     assert [m.shape[0] for m in back.occupancy_mip()] == [16, 8, 4, 2, 1]
+
+
+def test_step_res_sets_the_step_and_round_trips(model, tmp_path):
+    assert model.config.step_res is None     # the paper's s0 = 2 sqrt(3) / L_C
+    assert model.config.s0 == 2 * np.sqrt(3) / model.config.L_C
+    finer = replace(model, config=replace(model.config, step_res=4 * model.config.L_C))
+    back = load_baked(save_baked(finer, tmp_path / "m.npz"))
+    assert back.config.step_res == 4 * model.config.L_C
+    assert back.step == float(np.float32(1.25 * 2 * np.sqrt(3) / (4 * model.config.L_C)))
 
 
 def _corrupt(arrays, manifest, case):

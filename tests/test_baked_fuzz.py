@@ -34,7 +34,8 @@ VALID_VALUE = {"L": [1, 3, 30], "L_C": [32, 48, 1024, 2048], "log2_T": [4, 9, 24
                "scene": ["unbounded", "Bounded"], "G_res": [1, 4, 16, 32],
                "coarse_block": [1, 2, 16, 32], "near": [0.0, 0.5, 5.0, 1e30],
                "far": [0.06, 2.0, 1e30], "aux_levels": [1, 64], "aux_min_res": [1, 10**6],
-               "aux_log2_T": [4, 30], "aux_features": [1], "aux_hidden": [1]}
+               "aux_log2_T": [4, 30], "aux_features": [1], "aux_hidden": [1],
+               "step_res": [1, 64, 512, 10**7]}
 GAMMAS = [0, 0.0, -1.0, 1e-9, 1e-30, 5e-324, math.nan, math.inf, -math.inf, 1e300, 10**400,
           "1.0", True, None, [1.0], 1e-3, 0.3, 1e6, 3e38]
 
@@ -184,7 +185,9 @@ def test_every_mutant_is_refused_clearly_or_loads(outcomes):
                   "config.L=30", "config.L=10**30", "config.far=inf", "config.near=nan",
                   "config.G_res=0", "config.aux_levels=0", "config.L=True",
                   "config.aux_log2_T=30", "config.aux_levels=10**30", "gamma=min_gamma*0.99",
-                  "config.aux_min_res=1000000", "config.far=1e+300", "config.far=1e+30"):
+                  "config.aux_min_res=1000000", "config.far=1e+300", "config.far=1e+30",
+                  "config.step_res=0", "config.step_res=1.5", "config.step_res=True",
+                  "config.step_res=10000000"):
         assert label in refused, label
 
 

@@ -109,3 +109,25 @@ def test_seeds_train_every_row_per_seed_and_the_index_lists_each_table(fake_trai
     assert run.main(["ndrf-layers"] + common) == 0             # one seed, another run
     index = (tmp_path / "out" / "README.md").read_text()
     assert "(ndrf-layers.md)" in index and "(ndrf-teacher.md)" in index
+
+
+def test_builtin_scene_made_once_and_again_when_the_generator_changed(tmp_path, monkeypatch):
+    import clrender.data
+    from bench import cache
+    from clrender.data.scene import scene_key
+
+    made = []
+
+    def make_scene(kind, out, seed):
+        made.append(kind)
+        (out / "transforms_train.json").write_text(json.dumps({"clrender": scene_key(kind, seed)}))
+        return out
+
+    monkeypatch.setattr(clrender.data, "make_scene", make_scene)
+    path = cache.resolve_scene("builtin-bounded", tmp_path)
+    assert cache.resolve_scene("builtin-bounded", tmp_path) == path and made == ["bounded"]
+    meta = json.loads((path / "transforms_train.json").read_text())
+    meta["clrender"]["supersample"] = 2            # images of an older generator
+    (path / "transforms_train.json").write_text(json.dumps(meta))
+    assert cache.resolve_scene("builtin-bounded", tmp_path) == path
+    assert made == ["bounded", "bounded"] and not list(path.parent.glob(".tmp-scene-*"))

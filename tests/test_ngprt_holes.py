@@ -180,7 +180,8 @@ def test_kernel_takes_every_occupied_point_like_the_reference(patch_model):
     ("L", True), ("log2_T", 12.5), ("log2_T", 25), ("coarse_block", 0), ("G_res", 0),
     ("aux_levels", 0), ("aux_hidden", 2**40), ("aux_min_res", 64), ("near", math.nan),
     ("near", -1.0), ("far", math.inf), ("far", math.nan), ("far", 1e7), ("far", "1000"),
-    ("variant", None), ("scene", "Bounded")])
+    ("variant", None), ("scene", "Bounded"), ("step_res", 0), ("step_res", 1.5),
+    ("step_res", True)])
 def test_config_refuses_with_field_and_value(field, value):
     with pytest.raises(ValueError, match="invalid ModelConfig") as err:
         preset("tiny", **{field: value})

@@ -94,6 +94,24 @@ def test_three_levels_march_matches_reference(scene):
 
 
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
+def test_step_finer_than_the_coarse_grid_matches_reference(scene):
+    # step_res = 2 L_C (the cpu preset's ratio): two lattice points per coarse voxel
+    # diagonal; the march, G's skips and the lattice are the reference's.
+    config = preset("tiny", variant="separate-v", scene=scene, L_C=32, log2_T=11, G_res=16,
+                    step_res=64)
+    model, camera = random_baked_model(config, 3, 1.0), _camera(scene, 27)
+    assert model.step == pytest.approx(np.sqrt(3.0) / 32, rel=1e-6)
+    with_g = Renderer(model, use_G=True, exact=True).render(camera, background=BACKGROUND,
+                                                            stats=True)
+    without = Renderer(model, use_G=False, exact=True).render(camera, background=BACKGROUND,
+                                                              stats=True)
+    assert with_g["n_occ"].sum() > 0, "test model has no occupied sample in view"
+    _assert_matches(with_g, render_reference(model, camera, background=BACKGROUND, use_G=True))
+    np.testing.assert_array_equal(with_g["n_occ"], without["n_occ"])
+    assert with_g["n_march"].sum() < without["n_march"].sum()
+
+
+@pytest.mark.parametrize("scene", ["bounded", "unbounded"])
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_distance_grid_skips_only_empty_space(variant, scene):
     # Seed 3 puts empty coarse cells (exit level coarser than G) in view, where the paper

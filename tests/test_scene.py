@@ -33,7 +33,7 @@ def test_deterministic(scenes, kind):
 def test_loads_back(scenes, kind):
     folder = scenes[kind][0]
     meta = json.loads((folder / "transforms_train.json").read_text())
-    assert meta["clrender"] == {"scene": kind, "scale": 1.0, "seed": 3}
+    assert meta["clrender"] == {"scene": kind, "scale": 1.0, "seed": 3, "supersample": 8}
     train, test = load_dataset(folder, "train"), load_dataset(folder, "test")
     assert train.images.shape == (N_TRAIN, SIZE, SIZE, 3) and len(test.cameras) == N_TEST
     assert train.scene == test.scene == kind

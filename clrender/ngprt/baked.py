@@ -243,7 +243,7 @@ def _check_gamma(model: BakedModel, where: str) -> None:
         fail(where, f"gamma={gamma!r} is too small: the step s = gamma * s0 = {s:.3g} puts "
                     f"up to {points:.3g} lattice points on a ray, more than "
                     f"{MAX_LATTICE_POINTS} (need gamma >= {cfg.min_gamma:.3g} at "
-                    f"L_C={cfg.L_C}, {cfg.scene})")
+                    f"s0={cfg.s0:.3g}, {cfg.scene})")
 
 
 def validate(model: BakedModel, where: str = "model") -> None:
