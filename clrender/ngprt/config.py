@@ -171,6 +171,7 @@ class ModelConfig:
 
 _INT_FIELDS = ("L", "L_C", "log2_T", "G_res", "coarse_block", "aux_levels", "aux_min_res",
                "aux_log2_T", "aux_features", "aux_hidden")
+_OPTIONAL_INT_FIELDS = ("step_res",)    # None, or checked as the int fields
 
 
 def _type_problems(c: ModelConfig) -> list[str]:
@@ -182,17 +183,13 @@ def _type_problems(c: ModelConfig) -> list[str]:
         problems.append(f"variant {c.variant!r} is not one of {VARIANTS}")
     if c.scene not in SCENES:
         problems.append(f"scene {c.scene!r} is not one of {SCENES}")
-    for name in _INT_FIELDS:
+    optional = tuple(n for n in _OPTIONAL_INT_FIELDS if getattr(c, n) is not None)
+    for name in _INT_FIELDS + optional:
         v = getattr(c, name)
         if isinstance(v, bool) or not isinstance(v, numbers.Integral):
             problems.append(f"{name} must be an integer, got {v!r}")
         elif not 1 <= v <= INT32_MAX:
             problems.append(f"{name} must be in [1, {INT32_MAX}], got {v}")
-    if c.step_res is not None and (isinstance(c.step_res, bool)
-                                   or not isinstance(c.step_res, numbers.Integral)
-                                   or not 1 <= c.step_res <= INT32_MAX):
-        problems.append(f"step_res must be None or an integer in [1, {INT32_MAX}], "
-                        f"got {c.step_res!r}")
     for name in ("near", "far"):
         v = getattr(c, name)
         if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
