@@ -235,6 +235,15 @@ def padded(global_size: tuple[int, ...], local_size: tuple[int, ...]) -> tuple[i
     return tuple(-(-g // l) * l for g, l in zip(global_size, local_size))
 
 
+def check_allocation(device: cl.Device, what: str, nbytes: int) -> None:
+    """Raise ValueError naming ``what`` unless one buffer of ``nbytes`` bytes fits the
+    device's largest allocation (``CL_DEVICE_MAX_MEM_ALLOC_SIZE``)."""
+    limit = int(device.max_mem_alloc_size)
+    if nbytes > limit:
+        raise ValueError(f"{what}: needs {nbytes / 2**20:.1f} MiB in one buffer, more than "
+                         f"the {limit / 2**20:.0f} MiB {device.name.strip()} allocates")
+
+
 def event_ms(event: cl.Event) -> float:
     """Kernel time of a finished profiling event, in milliseconds."""
     event.wait()

@@ -1,42 +1,43 @@
-/* NDRF shading (docs/ndrf.md), three pixel-parallel passes; mirrors
- * clrender/ndrf/shader_ref.py:
- *   ndrf_gather  per pixel: for each mesh k the barycentric gather of features_k and of the
- *                hit position (zeros on a miss), then the view encoding of the camera ray
- *                (camera.h) -> screen; the coverage byte -> covered.
- *   ndrf_conv0   KSIZE x KSIZE conv C_IN -> HIDDEN over screen (x..x+PAD, y..y+PAD) (padding
- *                bottom/right), ReLU -> hidden.
+/* NDRF shading (docs/ndrf.md), two pixel-parallel passes, one per conv layer as in the
+ * paper's WebGL shader; mirrors clrender/ndrf/shader_ref.py:
+ *   ndrf_conv0   KSIZE x KSIZE conv C_IN -> HIDDEN, ReLU -> hidden, over the screen pixels
+ *                (x..x+PAD, y..y+PAD) (padding bottom/right). The screen pixels are gathered
+ *                on the fly into private memory (ndrf_screen_pixel): for each mesh k the
+ *                barycentric gather of features_k and of the hit position (zeros on a miss),
+ *                then the view encoding of the camera ray (camera.h); zeros outside the
+ *                image. No screen buffer travels through global memory.
  *   ndrf_conv1   KSIZE x KSIZE conv HIDDEN -> 3 over hidden (x-PAD..x, y-PAD..y) (padding
  *                top/left), sigmoid, composited on the background by coverage.
+ *   ndrf_screen  the screen buffer itself (tests only: the gather against the reference).
  * (PAD = KSIZE - 1.) Only what a covered pixel's colour depends on is computed: conv1 runs on
- * covered pixels, conv0 where a covered pixel reads its output, and the gather computes the
- * view encoding only where a covered pixel lies within PAD pixels (elsewhere the screen pixel
- * is all zeros). Uncovered pixels show the background whatever the shader computes there.
+ * covered pixels, conv0 where a covered pixel reads its output. A pixel is covered where any
+ * mesh's tri >= 0. Uncovered pixels show the background whatever the shader computes there.
  *
- * Buffers carry the convs' zero padding, so no conv read needs a bounds test; ndrf_zero
- * clears them once per image size and the three passes never write the padding:
- *   screen (height + PAD rows, screen_cols columns, C_IN): pixel (x, y) at row y, column x;
- *          screen_cols >= width + PIX - 1 + PAD covers a conv0 work-item's last reads.
- *   hidden (height + PAD rows, width + PAD columns, H_STRIDE): pixel (x, y) at (y + PAD, x + PAD).
- *   covered (height, width) uchar.
+ * Hits: tri (K, H, W) int (-1: miss) and bary (K, H, W, 2) float Embree (u, v), from the
+ * rasteriser (kernels/ndrf_raster.cl) or uploaded Embree hits.
+ * hidden (height + PAD rows, width + PAD columns, H_STRIDE): pixel (x, y) at (y + PAD,
+ * x + PAD); its padding is zeroed once per image size (ndrf_zero_padding) and never
+ * written; of the rest conv1 reads only what conv0 wrote in the same frame.
  *
  * -D defines (clrender/ndrf/shader_cl.py:kernel_defines): from NDRFConfig K, FEATURES,
  * C_IN, HIDDEN, N_FREQ, KSIZE; for the device H_VEC (8 or 16: floats per hidden-channel
  * vector), H_BLOCK (vectors per block of outputs kept in registers), H_STRIDE (HIDDEN
- * rounded up to whole blocks) and PIX (adjacent pixels per conv0 work-item). Weights,
- * zero-padded to H_STRIDE:
+ * rounded up to whole blocks) and PIX (adjacent pixels per conv0 work-item); FAST_MATH
+ * (native sin, cos, exp). Weights, zero-padded to H_STRIDE:
  *   w0 (KSIZE*KSIZE, C_IN, H_STRIDE) [tap, in, out], b0 (H_STRIDE),
  *   w1 (KSIZE*KSIZE, 3, H_STRIDE) [tap, out, in], b1 (3).
  * Speed: conv0 vectorises across output channels; each weight vector, read once per
- * work-item, serves PIX pixels. Plain a * b + c: mad()/fma() are several times slower on
- * PoCL (DESIGN.md, performance notes).
+ * work-item, serves PIX pixels, whose (PIX + PAD) x KSIZE screen pixels are gathered once.
+ * Plain a * b + c: mad()/fma() are several times slower on PoCL (DESIGN.md, performance
+ * notes).
  */
 #include "camera.h"
 #pragma OPENCL FP_CONTRACT OFF
 
 #if !defined(K) || !defined(FEATURES) || !defined(C_IN) || !defined(HIDDEN) || \
     !defined(N_FREQ) || !defined(KSIZE) || !defined(H_VEC) || !defined(H_BLOCK) || \
-    !defined(H_STRIDE) || !defined(PIX)
-#error "ndrf_shade.cl needs -D K FEATURES C_IN HIDDEN N_FREQ KSIZE H_VEC H_BLOCK H_STRIDE PIX"
+    !defined(H_STRIDE) || !defined(PIX) || !defined(FAST_MATH)
+#error "ndrf_shade.cl needs -D K FEATURES C_IN HIDDEN N_FREQ KSIZE H_VEC H_BLOCK H_STRIDE PIX FAST_MATH"
 #endif
 #if FEATURES != 8
 #error "the gather reads the per-vertex features as float8"
@@ -60,25 +61,46 @@ typedef float16 hvec;
 #error "H_VEC must be 8 or 16"
 #endif
 
+#if FAST_MATH
+#define NDRF_SIN native_sin
+#define NDRF_COS native_cos
+#define NDRF_EXP native_exp
+#else
+#define NDRF_SIN sin
+#define NDRF_COS cos
+#define NDRF_EXP exp
+#endif
+
 #define PAD (KSIZE - 1)
 #define VIEW_OFF ((FEATURES + 3) * K)
 
-/* buf[0..n) = 0. (clEnqueueFillBuffer would do, but Oclgrind 21.10's --uninitialized
- * plugin does not count it as a write.) */
-__kernel void ndrf_zero(__global float *buf, const int n)
+/* The hits of one frame and the meshes they index. */
+typedef struct {
+    __global const float *cam;
+    int width, height;
+    __global const int *tri;           /* (K, H, W) */
+    __global const float *bary;        /* (K, H, W, 2) */
+    __global const int *face_start;    /* (K + 1) */
+    __global const int *faces;         /* (sum F_k, 3), into the concatenated vertices */
+    __global const float *vertices;    /* (sum V_k, 3) */
+    __global const float *features;    /* (sum V_k, FEATURES) */
+} Frame;
+
+/* The hidden layer's padding (its first PAD rows and columns) = 0. (clEnqueueFillBuffer
+ * would do, but Oclgrind 21.10's --uninitialized plugin does not count it as a write.) */
+__kernel void ndrf_zero_padding(const int width, const int height, __global float *hidden)
 {
-    const int i = (int)get_global_id(0);
-    if (i < n) buf[i] = 0.0f;
+    const int x = (int)get_global_id(0), y = (int)get_global_id(1);
+    if (x >= width + PAD || y >= height + PAD || (x >= PAD && y >= PAD)) return;
+    __global float *h = hidden + ((size_t)y * (width + PAD) + x) * H_STRIDE;
+    for (int c = 0; c < H_STRIDE; ++c) h[c] = 0.0f;
 }
 
-/* Whether any pixel within PAD of (px, py) (clamped to the image) hits a mesh. */
-inline int ndrf_near_coverage(__global const int *tri, int width, int height, int px, int py)
+inline int ndrf_covered(const Frame *f, int p)
 {
-    const int n = width * height;
-    for (int y = max(py - PAD, 0); y <= min(py + PAD, height - 1); ++y)
-        for (int x = max(px - PAD, 0); x <= min(px + PAD, width - 1); ++x)
-            for (int k = 0; k < K; ++k)
-                if (tri[k * n + y * width + x] >= 0) return 1;
+    const int n = f->width * f->height;
+    for (int k = 0; k < K; ++k)
+        if (f->tri[k * n + p] >= 0) return 1;
     return 0;
 }
 
@@ -86,7 +108,7 @@ inline int ndrf_near_coverage(__global const int *tri, int width, int height, in
  * reference), five frequencies at a time: one float16 call vectorises where a scalar call
  * per channel does not (PoCL: ~30x faster). sincos() would save a little more but breaks
  * the --uninitialized plugin of Oclgrind 21.10 (its output pointer). */
-inline void ndrf_view_encoding(float3 d, __global float *v)
+inline void ndrf_view_encoding(float3 d, float *v)
 {
     vstore3(d, 0, v);
     float scale = 1.0f;
@@ -98,8 +120,8 @@ inline void ndrf_view_encoding(float3 d, __global float *v)
         }
         a[15] = 0.0f;
         const float16 a16 = vload16(0, a);
-        vstore16(sin(a16), 0, sa);
-        vstore16(cos(a16), 0, ca);
+        vstore16(NDRF_SIN(a16), 0, sa);
+        vstore16(NDRF_COS(a16), 0, ca);
         for (int i = 0; i < 5 && i0 + i < N_FREQ; ++i) {
             vstore3(vload3(i, sa), 0, v + 3 + 6 * (i0 + i));
             vstore3(vload3(i, ca), 0, v + 6 + 6 * (i0 + i));
@@ -107,56 +129,61 @@ inline void ndrf_view_encoding(float3 d, __global float *v)
     }
 }
 
-__kernel void ndrf_gather(__global const float *cam, const int width, const int height,
-                          __global const int *tri, __global const float *bary,
-                          __global const int *face_start, __global const int *faces,
-                          __global const float *vertices, __global const float *features,
-                          const int screen_cols, __global float *screen,
-                          __global uchar *covered)
+/* The C_IN screen channels of pixel (px, py) into out; all zeros outside the image. */
+inline void ndrf_screen_pixel(const Frame *f, int px, int py, float *out)
+{
+    if (px >= f->width || py >= f->height) {
+        for (int c = 0; c < C_IN; ++c) out[c] = 0.0f;
+        return;
+    }
+    const int n = f->width * f->height, p = py * f->width + px;
+    for (int k = 0; k < K; ++k) {
+        const int t = f->tri[k * n + p];
+        /* x as three floats: a float3 assigned in the branch crashes the --uninitialized
+         * plugin of Oclgrind 21.10 (tests/test_oclgrind.py). */
+        float8 feat = (float8)(0.0f);
+        float x[3] = {0.0f, 0.0f, 0.0f};
+        /* Hits index faces of mesh k (the host checks uploaded ones); the bound here only
+         * keeps reads inside the buffers. */
+        if (t >= 0 && t < f->face_start[k + 1] - f->face_start[k]) {
+            const int3 i = vload3(f->face_start[k] + t, f->faces);
+            const float2 uv = vload2(k * n + p, f->bary);
+            const float w = 1.0f - uv.x - uv.y;
+            feat = w * vload8(i.x, f->features) + uv.x * vload8(i.y, f->features)
+                   + uv.y * vload8(i.z, f->features);
+            for (int e = 0; e < 3; ++e)
+                x[e] = w * f->vertices[3 * i.x + e] + uv.x * f->vertices[3 * i.y + e]
+                       + uv.y * f->vertices[3 * i.z + e];
+        }
+        vstore8(feat, 0, out + FEATURES * k);
+        for (int e = 0; e < 3; ++e) out[FEATURES * K + 3 * k + e] = x[e];
+    }
+    ndrf_view_encoding(camera_ray_dir(f->cam, px, py), out + VIEW_OFF);
+}
+
+#define FRAME_ARGS __global const float *cam, const int width, const int height, \
+    __global const int *tri, __global const float *bary, __global const int *face_start, \
+    __global const int *faces, __global const float *vertices, __global const float *features
+#define FRAME_INIT {cam, width, height, tri, bary, face_start, faces, vertices, features}
+
+__kernel void ndrf_screen(FRAME_ARGS, __global float *screen)
 {
     const int px = (int)get_global_id(0), py = (int)get_global_id(1);
     if (px >= width || py >= height) return;
-    const int n = width * height, p = py * width + px;
-    __global float *out = screen + ((size_t)py * screen_cols + px) * C_IN;
-    uchar cov = 0;
-    for (int k = 0; k < K; ++k) {
-        const int t = tri[k * n + p];
-        /* x as three floats: a float3 assigned in the branch crashes the --uninitialized
-         * plugin of Oclgrind 21.10 (tests/test_oclgrind.py). */
-        float8 f = (float8)(0.0f);
-        float x[3] = {0.0f, 0.0f, 0.0f};
-        /* The host checks t < F_k; the bound here only keeps reads inside the buffers. */
-        if (t >= 0 && t < face_start[k + 1] - face_start[k]) {
-            const int3 i = vload3(face_start[k] + t, faces);
-            const float2 uv = vload2(k * n + p, bary);
-            const float w = 1.0f - uv.x - uv.y;
-            f = w * vload8(i.x, features) + uv.x * vload8(i.y, features)
-                + uv.y * vload8(i.z, features);
-            for (int e = 0; e < 3; ++e)
-                x[e] = w * vertices[3 * i.x + e] + uv.x * vertices[3 * i.y + e]
-                       + uv.y * vertices[3 * i.z + e];
-            cov = 1;
-        }
-        vstore8(f, 0, out + FEATURES * k);
-        for (int e = 0; e < 3; ++e) out[FEATURES * K + 3 * k + e] = x[e];
-    }
-    covered[p] = cov;
-    if (cov || ndrf_near_coverage(tri, width, height, px, py)) {
-        ndrf_view_encoding(camera_ray_dir(cam, px, py), out + VIEW_OFF);
-    } else {
-        for (int c = VIEW_OFF; c < C_IN; ++c) out[c] = 0.0f;
-    }
+    const Frame f = FRAME_INIT;
+    float out[C_IN];
+    ndrf_screen_pixel(&f, px, py, out);
+    for (int c = 0; c < C_IN; ++c) screen[(size_t)(py * width + px) * C_IN + c] = out[c];
 }
 
 /* Whether conv1 reads hidden at any of pixels (x0..x0+PIX-1, y0) for a covered pixel: the
  * readers of (x, y) are (x..x+PAD, y..y+PAD). */
-inline int ndrf_hidden_needed(__global const uchar *covered, int width, int height, int x0,
-                              int y0)
+inline int ndrf_hidden_needed(const Frame *f, int x0, int y0)
 {
-    const int x1 = min(x0 + PIX + PAD, width), y1 = min(y0 + KSIZE, height);
+    const int x1 = min(x0 + PIX + PAD, f->width), y1 = min(y0 + KSIZE, f->height);
     for (int y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x)
-            if (covered[y * width + x]) return 1;
+            if (ndrf_covered(f, y * f->width + x)) return 1;
     return 0;
 }
 
@@ -165,29 +192,29 @@ inline hvec ndrf_relu(hvec x)
     return x > 0.0f ? x : (hvec)(0.0f);
 }
 
-__kernel void ndrf_conv0(const int width, const int height, const int screen_cols,
-                         __global const float *screen, __global const uchar *covered,
-                         __global const float *w0, __global const float *b0,
+__kernel void ndrf_conv0(FRAME_ARGS, __global const float *w0, __global const float *b0,
                          __global float *hidden)
 {
     const int x0 = (int)get_global_id(0) * PIX, py = (int)get_global_id(1);
     if (x0 >= width || py >= height) return;
-    if (!ndrf_hidden_needed(covered, width, height, x0, py)) return;
+    const Frame f = FRAME_INIT;
+    if (!ndrf_hidden_needed(&f, x0, py)) return;
+    float in[KSIZE][PIX + PAD][C_IN];
+    for (int dy = 0; dy < KSIZE; ++dy)
+        for (int i = 0; i < PIX + PAD; ++i) ndrf_screen_pixel(&f, x0 + i, py + dy, in[dy][i]);
     for (int j0 = 0; j0 < H_STRIDE / H_VEC; j0 += H_BLOCK) {
         hvec acc[PIX][H_BLOCK];
         for (int q = 0; q < PIX; ++q)
             for (int j = 0; j < H_BLOCK; ++j) acc[q][j] = vload_h(j0 + j, b0);
         for (int dy = 0; dy < KSIZE; ++dy) {
             for (int dx = 0; dx < KSIZE; ++dx) {
-                __global const float *in =
-                    screen + ((size_t)(py + dy) * screen_cols + x0 + dx) * C_IN;
                 __global const float *w =
                     w0 + (dy * KSIZE + dx) * C_IN * H_STRIDE + H_VEC * j0;
                 for (int c = 0; c < C_IN; ++c) {
                     for (int j = 0; j < H_BLOCK; ++j) {
                         const hvec wv = vload_h(j, w + c * H_STRIDE);
                         for (int q = 0; q < PIX; ++q)
-                            acc[q][j] = acc[q][j] + in[q * C_IN + c] * wv;
+                            acc[q][j] = acc[q][j] + in[dy][q + dx][c] * wv;
                     }
                 }
             }
@@ -215,15 +242,20 @@ inline float ndrf_sum(hvec a)
     return t[0] + t[1];
 }
 
-__kernel void ndrf_conv1(const int width, const int height, __global const float *hidden,
-                         __global const uchar *covered, __global const float *w1,
+inline float ndrf_sigmoid(float x)
+{
+    return 1.0f / (1.0f + NDRF_EXP(-x));
+}
+
+__kernel void ndrf_conv1(FRAME_ARGS, __global const float *hidden, __global const float *w1,
                          __global const float *b1, const float bg_r, const float bg_g,
                          const float bg_b, __global float *rgb)
 {
     const int px = (int)get_global_id(0), py = (int)get_global_id(1);
     if (px >= width || py >= height) return;
+    const Frame f = FRAME_INIT;
     const int p = py * width + px;
-    if (!covered[p]) {
+    if (!ndrf_covered(&f, p)) {
         rgb[3 * p] = bg_r;
         rgb[3 * p + 1] = bg_g;
         rgb[3 * p + 2] = bg_b;
@@ -243,7 +275,7 @@ __kernel void ndrf_conv1(const int width, const int height, __global const float
             }
         }
     }
-    rgb[3 * p] = 1.0f / (1.0f + exp(-(b1[0] + ndrf_sum(a0))));
-    rgb[3 * p + 1] = 1.0f / (1.0f + exp(-(b1[1] + ndrf_sum(a1))));
-    rgb[3 * p + 2] = 1.0f / (1.0f + exp(-(b1[2] + ndrf_sum(a2))));
+    rgb[3 * p] = ndrf_sigmoid(b1[0] + ndrf_sum(a0));
+    rgb[3 * p + 1] = ndrf_sigmoid(b1[1] + ndrf_sum(a1));
+    rgb[3 * p + 2] = ndrf_sigmoid(b1[2] + ndrf_sum(a2));
 }

@@ -6,8 +6,9 @@ hits from Embree, orbit cameras at radius ~3, odd image sizes; PoCL on the CPU.
 Tolerances (stated, not tuned):
 - rgb, kernel vs reference: max abs 1e-5 (sin/cos/exp differ by a few ulps between the
   OpenCL builtins and numpy; sums run in different orders).
-- screen buffer, kernel vs reference: features and hit positions bit-identical (same
-  float32 operations in the same order), view encoding within 1e-6.
+- screen buffer (what conv0 gathers), kernel vs reference: features and hit positions
+  bit-identical (same float32 operations in the same order), view encoding within 1e-6.
+- the fast build (native sin, cos, exp) against the exact one: >= 50 dB PSNR.
 - reference conv shader vs torch.nn.functional.conv2d in float64: max abs 1e-5.
 - uncovered pixels: exactly the background.
 """
@@ -41,7 +42,7 @@ def _model(K: int, kernel_size: int, seed: int = 0):
 
 @functools.lru_cache(maxsize=None)
 def _shader(K: int, kernel_size: int) -> Shader:
-    return Shader(_model(K, kernel_size))
+    return Shader(_model(K, kernel_size), exact=True)
 
 
 def _orbit(azimuth_deg: float, elevation_deg: float, radius: float = 3.0, target=(0, 0, 0)):
@@ -81,7 +82,7 @@ def test_shade_matches_reference(K, kernel_size):
         np.testing.assert_allclose(rgb, ref, rtol=0, atol=RGB_ATOL)
         np.testing.assert_array_equal(rgb[~coverage], np.broadcast_to(
             np.float32(background), rgb[~coverage].shape))
-        assert set(ms) == {"ms_gather", "ms_conv0", "ms_conv1"}
+        assert set(ms) == {"ms_conv0", "ms_conv1"}
         assert all(v >= 0.0 for v in ms.values())
 
 
@@ -102,7 +103,7 @@ def test_other_shapes_and_layouts_match_reference(monkeypatch, layout, shape):
 
     monkeypatch.setattr(shader_cl, "device_layout", lambda device: dict(layout))
     model = random_ndrf_model(NDRFConfig(**shape), seed=7)
-    shader = Shader(model)
+    shader = Shader(model, exact=True)
     assert shader.defines["H_VEC"] == layout["H_VEC"]
     camera, hits, dirs = _inputs(model, *VIEWS[1])
     rgb, _ = shader.shade(camera, hits.tri, hits.bary)
@@ -128,16 +129,20 @@ def test_screen_buffer_matches_reference(kernel_size):
         assert out.shape == ref.shape == (height, width, model.config.c_in)
         n_geo = 11 * model.config.K
         np.testing.assert_array_equal(out[..., :n_geo], ref[..., :n_geo])
-        # The gather encodes the view only within kernel_size - 1 pixels of a hit: nothing
-        # else reaches a covered pixel's colour.
-        r, cov = kernel_size - 1, hits.coverage
-        near = np.zeros_like(cov)
-        for dy in range(-r, r + 1):
-            for dx in range(-r, r + 1):
-                near |= np.roll(np.pad(cov, r), (dy, dx), (0, 1))[r:r + height, r:r + width]
-        np.testing.assert_allclose(out[near, n_geo:], ref[near, n_geo:], rtol=0,
-                                   atol=VIEW_ATOL)
-        assert not out[~near, n_geo:].any()
+        np.testing.assert_allclose(out[..., n_geo:], ref[..., n_geo:], rtol=0, atol=VIEW_ATOL)
+
+
+@pytest.mark.parametrize("kernel_size", [2, 1])
+def test_fast_build_within_50_db_of_exact(kernel_size):
+    from clrender.metrics import psnr
+
+    model = _model(2, kernel_size)
+    fast = Shader(model)
+    for width, height, c2w in VIEWS:
+        camera, hits, _ = _inputs(model, width, height, c2w)
+        exact_rgb, _ = _shader(2, kernel_size).shade(camera, hits.tri, hits.bary)
+        fast_rgb, _ = fast.shade(camera, hits.tri, hits.bary)
+        assert psnr(fast_rgb, exact_rgb) >= 50.0
 
 
 def test_all_misses_give_the_background():
@@ -153,13 +158,13 @@ def test_buffers_persist_per_size():
     model, shader = _model(1, 2), _shader(1, 2)
     camera, hits, _ = _inputs(model, *VIEWS[0])
     first, _ = shader.shade(camera, hits.tri, hits.bary)
-    screen = shader._bufs["screen"]
+    hidden = shader._bufs["hidden"]
     again, _ = shader.shade(camera, hits.tri, hits.bary)
-    assert shader._bufs["screen"] is screen
+    assert shader._bufs["hidden"] is hidden
     np.testing.assert_array_equal(first, again)
     other, hits2, _ = _inputs(model, *VIEWS[2])
     shader.shade(other, hits2.tri, hits2.bary)
-    assert shader._bufs["screen"] is not screen
+    assert shader._bufs["hidden"] is not hidden
 
 
 def test_bad_hits_are_rejected():

@@ -1,11 +1,13 @@
-"""The NDRF renderer: Embree first hits on the K meshes, then the OpenCL shading passes.
+"""The NDRF renderer: first hits on the K meshes (the OpenCL rasteriser, or Embree), then
+the OpenCL shading passes.
 
 Examples:
-    >>> r = Renderer(load_baked("ndrf.npz"))
+    >>> r = Renderer(load_baked("ndrf.npz"))              # hits="raster": all on the device
     >>> out = r.render(camera)          # out["rgb"]: (H, W, 3) float32; ms per stage
+    >>> Renderer(model, hits="embree").render(camera)     # the reference hits (host)
 
-References: NDRF (Wan et al., CVPR 2023) §3.4 (hardware rasterisation replaced by Embree
-ray casting; the two conv passes as in the supplement §3).
+References: NDRF (Wan et al., CVPR 2023) §3.4 (rasterisation, then the two conv passes as
+in the supplement §3).
 """
 from __future__ import annotations
 
@@ -14,27 +16,55 @@ import time
 import numpy as np
 
 from .hits import HitCaster
+from .raster_cl import Rasteriser
 from .shader_cl import Shader
+
+HIT_SOURCES = ("raster", "embree")
 
 
 class Renderer:
-    """Renders a baked NDRF model: Embree scenes and device buffers are built once.
+    """Renders a baked NDRF model: device buffers (and Embree scenes) are built once.
 
     Args:
         model: a :class:`clrender.ndrf.baked.NDRFModel`, validated by its loader.
         device: OpenCL device spec or :class:`clrender.device.Runtime`.
+        hits: "raster" (the OpenCL rasteriser; hits stay on the device) or "embree" (ray
+            casting on the host, uploaded each frame: the reference).
+        exact: the shader's exact build (held to the numpy reference in tests); default the
+            fast one.
     """
 
     SCALAR_STATS = {"Coverage": "coverage"}
-    RENDER_OPTIONS: dict = {}
-    TIME_NOTE = ("time per frame: ray casting into the meshes (Embree, on the CPU) + the "
-                 "OpenCL gather and two conv passes (kernel times)")
+    RENDER_OPTIONS = {"hits": str}
+    TIME_NOTE = ("time per frame: the hits (OpenCL rasteriser kernels, or Embree ray casting "
+                 "on the host plus the upload) + the two OpenCL conv passes (kernel times)")
 
-    def __init__(self, model, device=None):
-        self.model, self.config = model, model.config
-        self.caster = HitCaster(model)
-        self.shader = Shader(model, device=device)
+    def __init__(self, model, device=None, hits: str = "raster", exact: bool = False):
+        if hits not in HIT_SOURCES:
+            raise ValueError(f"hits={hits!r}: expected one of {', '.join(HIT_SOURCES)}")
+        self.model, self.config, self.hits = model, model.config, hits
+        self.shader = Shader(model, device=device, exact=exact)
         self.runtime = self.shader.runtime
+        if hits == "raster":
+            self.rasteriser = Rasteriser(model, device=self.runtime)
+        else:
+            self.caster = HitCaster(model)
+
+    @property
+    def hit_source(self) -> str:
+        """How hits are made, e.g. "raster (64-bit atomics)" or "embree (host)"."""
+        return f"raster ({self.rasteriser.mode})" if self.hits == "raster" else "embree (host)"
+
+    def _hits(self, camera) -> tuple:
+        """(tri buffer, bary buffer, ms_intersect, host Hits or None)."""
+        if self.hits == "raster":
+            bufs, ms = self.rasteriser.rasterise(camera)
+            return bufs["tri"], bufs["bary"], ms["ms_raster"] + ms["ms_resolve"], None
+        start = time.perf_counter()
+        hits = self.caster.cast_camera(camera)
+        tri, bary = self.shader.upload_hits(camera, hits.tri, hits.bary)
+        self.runtime.queue.finish()
+        return tri, bary, (time.perf_counter() - start) * 1e3, hits
 
     def render(self, camera, background=None, stats: bool = False) -> dict:
         """Render one view.
@@ -46,18 +76,17 @@ class Renderer:
                 ``n_hits`` (H, W) int32 meshes hit and ``depth`` (H, W) float32, the
                 nearest hit in world units along the ray (0 where nothing is hit).
         Returns:
-            dict with ``rgb`` (H, W, 3) float32 in [0, 1], ``ms_intersect`` (Embree, wall
-            time), ``ms_gather``, ``ms_conv0``, ``ms_conv1`` (kernel times) and ``ms``
-            their sum.
+            dict with ``rgb`` (H, W, 3) float32 in [0, 1], ``ms_intersect`` (the hits:
+            rasteriser kernel times, or Embree wall time with the upload), ``ms_conv0``
+            (with the gather), ``ms_conv1`` (kernel times) and ``ms`` their sum.
         """
-        start = time.perf_counter()
-        hits = self.caster.cast_camera(camera)
-        ms_intersect = (time.perf_counter() - start) * 1e3
+        tri, bary, ms_intersect, hits = self._hits(camera)
         bg = self.model.background if background is None else background
-        rgb, times = self.shader.shade(camera, hits.tri, hits.bary, bg)
+        rgb, times = self.shader.shade_device(camera, tri, bary, bg)
         out = {"rgb": rgb, "ms_intersect": ms_intersect, **times}
         out["ms"] = float(sum(v for k, v in out.items() if k.startswith("ms_")))
         if stats:
+            hits = hits or self.rasteriser.read_hits(camera)
             hit = hits.tri >= 0
             out["coverage"] = hit.any(axis=0).astype(np.float32)
             out["n_hits"] = hit.sum(axis=0).astype(np.int32)

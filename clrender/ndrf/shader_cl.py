@@ -1,18 +1,22 @@
-"""The OpenCL NDRF shader: screen-buffer gather, 2x2 conv + ReLU, 2x2 conv + sigmoid.
+"""The OpenCL NDRF shader: 2x2 conv + ReLU over the gathered screen pixels, 2x2 conv +
+sigmoid.
 
-Three pixel-parallel passes (``kernels/ndrf_shade.cl``, one per conv layer as in the
-paper's WebGL shader) implement docs/ndrf.md; :mod:`clrender.ndrf.shader_ref` is the numpy
-reference they are tested against. A :class:`Shader` uploads the meshes, features and
-weights once, builds its program once per (device, ``-D`` defines) and keeps its screen
-buffers from call to call while the image size stays the same. The passes compute only
-what a covered pixel's colour depends on (the kernel file's header says how); pixels no
-mesh covers get the background, as the contract says they must.
+Two pixel-parallel passes (``kernels/ndrf_shade.cl``, one per conv layer as in the paper's
+WebGL shader) implement docs/ndrf.md; :mod:`clrender.ndrf.shader_ref` is the numpy
+reference they are tested against. The first pass gathers each screen pixel's features,
+hit positions and view encoding from the hits on the fly, so no screen buffer goes through
+global memory. A :class:`Shader` uploads the meshes, features and weights once, builds its
+program once per (device, ``-D`` defines, build) and keeps its frame buffers while the image
+size stays the same. The hits come from the device (:meth:`Shader.shade_device`, the
+rasteriser's buffers) or from the host (:meth:`Shader.shade`, Embree's arrays, uploaded).
+The passes compute only what a covered pixel's colour depends on; pixels no mesh covers get
+the background, as the contract says they must.
 
 Examples:
     >>> hits = HitCaster(model).cast_camera(camera)
     >>> shader = Shader(model)
     >>> rgb, ms = shader.shade(camera, hits.tri, hits.bary, model.background)
-    >>> ms["ms_gather"], ms["ms_conv0"], ms["ms_conv1"]
+    >>> ms["ms_conv0"], ms["ms_conv1"]
 
 References: NDRF (Wan et al., CVPR 2023) §3.2, §3.4; supplement §3.
 """
@@ -21,12 +25,14 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ..device import device_type_name, event_ms, get_runtime, padded, work_group_size
+from ..device import (check_allocation, device_type_name, event_ms, get_runtime, padded,
+                      work_group_size)
 from .baked import validate
 from .config import FEATURES, NDRFConfig
+from .raster_cl import packed_geometry
 
 F32, I32 = np.float32, np.int32
-KERNELS = ("ndrf_gather", "ndrf_conv0", "ndrf_conv1")
+KERNELS = ("ndrf_conv0", "ndrf_conv1", "ndrf_screen", "ndrf_zero_padding")
 BLOCK_FLOATS = 32     # output channels per conv0 block (H_VEC * H_BLOCK)
 
 
@@ -67,24 +73,11 @@ def kernel_defines(config: NDRFConfig, h_vec: int = 8, accumulators: int = 0) ->
 
 
 def packed_meshes(model) -> dict:
-    """The K meshes concatenated for the gather kernel.
-
-    Returns:
-        ``face_start`` (K+1,) int32 first face of each mesh (the last entry is the total);
-        ``faces`` (sum F_k, 3) int32 indices into the concatenated vertices;
-        ``vertices`` (sum V_k, 3) and ``features`` (sum V_k, 8) float32.
-    """
-    faces, vertices, features, face_start = [], [], [], [0]
-    n_vertices = 0
-    for k in range(model.config.K):
-        v, f, feat = model.mesh(k)
-        faces.append(np.asarray(f, I32) + I32(n_vertices))
-        vertices.append(np.asarray(v, F32))
-        features.append(np.asarray(feat, F32))
-        n_vertices += len(v)
-        face_start.append(face_start[-1] + len(f))
-    return {"face_start": np.asarray(face_start, I32), "faces": np.concatenate(faces),
-            "vertices": np.concatenate(vertices), "features": np.concatenate(features)}
+    """The K meshes concatenated for the gather: :func:`clrender.ndrf.raster_cl.packed_geometry`
+    (``face_start``, ``faces``, ``vertices``) and ``features`` (sum V_k, 8) float32."""
+    K = model.config.K
+    return {**packed_geometry([model.mesh(k)[:2] for k in range(K)]),
+            "features": np.concatenate([np.asarray(model.mesh(k)[2], F32) for k in range(K)])}
 
 
 def packed_weights(model, defines: dict) -> dict:
@@ -112,18 +105,20 @@ class Shader:
         model: an :class:`clrender.ndrf.baked.NDRFModel` (validated here).
         device: OpenCL device spec or :class:`clrender.device.Runtime` (default
             ``$CLRENDER_DEVICE``).
+        exact: the exact build (``Runtime.program(exact=True)``, held to the numpy
+            reference in tests); default the fast build (native sin, cos and exp).
     """
 
-    def __init__(self, model, device=None):
+    def __init__(self, model, device=None, exact: bool = False):
         validate(model, "Shader model")
         self.model, self.config = model, model.config
         self.runtime = rt = get_runtime(device)
+        self.exact = bool(exact)
         layout = device_layout(rt.device)
         self.defines = kernel_defines(self.config, layout["H_VEC"], layout["ACCUMULATORS"])
-        program = rt.program("ndrf_shade.cl", self.defines)
+        program = rt.program("ndrf_shade.cl", self.defines, self.exact)
         self._kernels = {name: program.kernel(name) for name in KERNELS}
         self._local: dict = {}
-        self._zero = program.kernel("ndrf_zero")
         self._n_faces = [len(model.mesh(k)[1]) for k in range(self.config.K)]
         arrays = {**packed_meshes(model), **packed_weights(model, self.defines)}
         mf = cl.mem_flags
@@ -134,32 +129,30 @@ class Shader:
         self._bufs: dict = {}
 
     def _frame_buffers(self, width: int, height: int) -> dict:
-        """Per-size buffers, re-allocated only when the image size changes. The screen and
-        hidden buffers hold the convs' zero padding (layout in kernels/ndrf_shade.cl):
-        zeroed once here, never written by the three passes."""
+        """Per-size buffers, re-allocated only when the image size changes: the camera, the
+        hidden layer (its padding zeroed here, never written by the passes; layout in
+        kernels/ndrf_shade.cl), the image and, once hits are uploaded, their buffers."""
         if self._size != (width, height):
             ctx, q, mf = self.runtime.context, self.runtime.queue, cl.mem_flags
-            d, n, K = self.defines, width * height, self.config.K
+            d, n = self.defines, width * height
             r = d["KSIZE"] - 1
-            self.screen_cols = width + d["PIX"] - 1 + r
-            screen_floats = (height + r) * self.screen_cols * d["C_IN"]
             hidden_floats = (height + r) * (width + r) * d["H_STRIDE"]
-            if max(screen_floats, hidden_floats, K * n * 2) >= 2 ** 31:
-                raise ValueError(f"{width}x{height} pixels: the shader's buffers would need "
-                                 f"more than 2^31 floats (int32 kernel indices)")
-            self._bufs = {
-                "cam": cl.Buffer(ctx, mf.READ_ONLY, 16 * 4),
-                "tri": cl.Buffer(ctx, mf.READ_ONLY, K * n * 4),
-                "bary": cl.Buffer(ctx, mf.READ_ONLY, K * n * 8),
-                "screen": cl.Buffer(ctx, mf.READ_WRITE, screen_floats * 4),
-                "covered": cl.Buffer(ctx, mf.READ_WRITE, n),
-                "hidden": cl.Buffer(ctx, mf.READ_WRITE, hidden_floats * 4),
-                "rgb": cl.Buffer(ctx, mf.WRITE_ONLY, n * 12),
-            }
-            for name, size in (("screen", screen_floats), ("hidden", hidden_floats)):
-                self._zero(q, (_round_up(size, 64),), None, self._bufs[name], np.int32(size))
+            self._bufs = {"cam": cl.Buffer(ctx, mf.READ_ONLY, 16 * 4)}
+            self._bufs.update(self._allocate(width, height, {"hidden": hidden_floats * 4,
+                                                             "rgb": n * 12}))
+            self._run("ndrf_zero_padding", width + r, height + r, np.int32(width),
+                      np.int32(height), self._bufs["hidden"])
             self._size = (width, height)
         return self._bufs
+
+    def _allocate(self, width: int, height: int, sizes: dict) -> dict:
+        """``{name: device buffer}`` of ``sizes`` bytes, each checked against the device's
+        largest allocation first."""
+        for name, nbytes in sizes.items():
+            check_allocation(self.runtime.device, f"shader buffer '{name}' for "
+                             f"{width}x{height} pixels", nbytes)
+        return {name: cl.Buffer(self.runtime.context, cl.mem_flags.READ_WRITE, nbytes)
+                for name, nbytes in sizes.items()}
 
     def _check_hits(self, camera, tri, bary) -> tuple[np.ndarray, np.ndarray]:
         K, h, w = self.config.K, camera.height, camera.width
@@ -176,17 +169,21 @@ class Shader:
                                  f"-1 (miss) or a face of mesh {k} in [0, {n_faces})")
         return np.ascontiguousarray(tri, I32), np.ascontiguousarray(bary, F32)
 
-    def _gather(self, camera, tri, bary) -> cl.Event:
+    def upload_hits(self, camera, hits_tri, hits_bary) -> tuple[cl.Buffer, cl.Buffer]:
+        """Host hits (validated) copied into this shader's frame buffers for ``camera``."""
         w, h = camera.width, camera.height
-        b, m, q = self._frame_buffers(w, h), self._model_bufs, self.runtime.queue
-        tri, bary = self._check_hits(camera, tri, bary)
-        cl.enqueue_copy(q, b["cam"], camera.packed())
+        b, q = self._frame_buffers(w, h), self.runtime.queue
+        tri, bary = self._check_hits(camera, hits_tri, hits_bary)
+        if "tri" not in b:
+            b.update(self._allocate(w, h, {"tri": tri.nbytes, "bary": bary.nbytes}))
         cl.enqueue_copy(q, b["tri"], tri)
         cl.enqueue_copy(q, b["bary"], bary)
-        return self._run("ndrf_gather", w, h, b["cam"], np.int32(w), np.int32(h), b["tri"],
-                         b["bary"], m["face_start"], m["faces"], m["vertices"],
-                         m["features"], np.int32(self.screen_cols), b["screen"],
-                         b["covered"])
+        return b["tri"], b["bary"]
+
+    def _frame_args(self, camera, tri_buf, bary_buf) -> tuple:
+        m = self._model_bufs
+        return (self._bufs["cam"], np.int32(camera.width), np.int32(camera.height), tri_buf,
+                bary_buf, m["face_start"], m["faces"], m["vertices"], m["features"])
 
     def _run(self, name: str, items_x: int, items_y: int, *args) -> cl.Event:
         """Enqueue kernel ``name`` over ``items_x`` x ``items_y`` work-items; the local size
@@ -199,42 +196,50 @@ class Shader:
         return self._kernels[name](self.runtime.queue, padded((items_x, items_y), local), local,
                                    *args)
 
-    def shade(self, camera, hits_tri, hits_bary, background=None):
-        """Shade one frame.
+    def shade_device(self, camera, tri_buf, bary_buf, background=None):
+        """Shade one frame from hits already on the device.
 
         Args:
             camera: a :class:`clrender.camera.Camera` (rays from ``kernels/camera.h``,
                 bit-identical to ``generate_rays``).
-            hits_tri: (K, H, W) int32 hit triangles, -1 for a miss.
-            hits_bary: (K, H, W, 2) float32 Embree barycentrics (u, v).
+            tri_buf: device buffer (K, H, W) int32 hit triangles, -1 for a miss, each a
+                face of its mesh (the rasteriser's, or :meth:`upload_hits`).
+            bary_buf: device buffer (K, H, W, 2) float32 Embree barycentrics (u, v).
             background: RGB in [0, 1] (default: the model's).
         Returns:
-            ``(rgb, ms)``: rgb (H, W, 3) float32 in [0, 1]; ms ``{"ms_gather",
-            "ms_conv0", "ms_conv1"}`` kernel times in milliseconds (OpenCL events).
+            ``(rgb, ms)``: rgb (H, W, 3) float32 in [0, 1]; ms ``{"ms_conv0", "ms_conv1"}``
+            kernel times in milliseconds (OpenCL events; the gather runs inside conv0).
         """
         w, h = camera.width, camera.height
+        b, m, q = self._frame_buffers(w, h), self._model_bufs, self.runtime.queue
         bg = self.model.background if background is None else background
         bg = [F32(c) for c in np.asarray(bg, np.float64).reshape(3)]
-        ev_gather = self._gather(camera, hits_tri, hits_bary)
-        b, m = self._bufs, self._model_bufs
+        cl.enqueue_copy(q, b["cam"], camera.packed())
+        frame = self._frame_args(camera, tri_buf, bary_buf)
         pix = self.defines["PIX"]
-        ev_conv0 = self._run("ndrf_conv0", -(-w // pix), h, np.int32(w), np.int32(h),
-                             np.int32(self.screen_cols), b["screen"], b["covered"], m["w0"],
-                             m["b0"], b["hidden"])
-        ev_conv1 = self._run("ndrf_conv1", w, h, np.int32(w), np.int32(h), b["hidden"],
-                             b["covered"], m["w1"], m["b1"], *bg, b["rgb"])
+        ev_conv0 = self._run("ndrf_conv0", -(-w // pix), h, *frame, m["w0"], m["b0"],
+                             b["hidden"])
+        ev_conv1 = self._run("ndrf_conv1", w, h, *frame, b["hidden"], m["w1"], m["b1"], *bg,
+                             b["rgb"])
         rgb = np.empty((h, w, 3), F32)
-        cl.enqueue_copy(self.runtime.queue, rgb, b["rgb"])
-        return rgb, {"ms_gather": event_ms(ev_gather), "ms_conv0": event_ms(ev_conv0),
-                     "ms_conv1": event_ms(ev_conv1)}
+        cl.enqueue_copy(q, rgb, b["rgb"])
+        return rgb, {"ms_conv0": event_ms(ev_conv0), "ms_conv1": event_ms(ev_conv1)}
+
+    def shade(self, camera, hits_tri, hits_bary, background=None):
+        """Shade one frame from host hits: ``hits_tri`` (K, H, W) int32 (-1 for a miss),
+        ``hits_bary`` (K, H, W, 2) float32, validated and uploaded; as :meth:`shade_device`."""
+        tri_buf, bary_buf = self.upload_hits(camera, hits_tri, hits_bary)
+        return self.shade_device(camera, tri_buf, bary_buf, background)
 
     def screen_buffer(self, camera, hits_tri, hits_bary) -> np.ndarray:
-        """The gather pass alone, for tests: (H, W, C_in) float32 as
-        :func:`clrender.ndrf.shader_ref.screen_buffer` where a covered pixel lies within
-        kernel_size - 1 pixels, features and positions only (view encoding zeros) elsewhere.
-        """
-        self._gather(camera, hits_tri, hits_bary)
-        d, h, w = self.defines, camera.height, camera.width
-        out = np.empty((h + d["KSIZE"] - 1, self.screen_cols, d["C_IN"]), F32)
-        cl.enqueue_copy(self.runtime.queue, out, self._bufs["screen"])
-        return out[:h, :w].copy()
+        """The gathered screen pixels, for tests: (H, W, C_in) float32 as
+        :func:`clrender.ndrf.shader_ref.screen_buffer` (conv0 gathers the same values)."""
+        tri_buf, bary_buf = self.upload_hits(camera, hits_tri, hits_bary)
+        w, h, c = camera.width, camera.height, self.config.c_in
+        q = self.runtime.queue
+        cl.enqueue_copy(q, self._bufs["cam"], camera.packed())
+        screen = self._allocate(w, h, {"screen": w * h * c * 4})["screen"]
+        self._run("ndrf_screen", w, h, *self._frame_args(camera, tri_buf, bary_buf), screen)
+        out = np.empty((h, w, c), F32)
+        cl.enqueue_copy(q, out, screen)
+        return out

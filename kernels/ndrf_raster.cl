@@ -1,0 +1,276 @@
+/* NDRF visibility-buffer rasteriser (docs/ndrf.md "Hits"); mirrors the Embree first hits of
+ * clrender/ndrf/hits.py, which the tests hold it to:
+ *   ndrf_raster_clear  every pixel of every mesh: no hit yet.
+ *   ndrf_raster_tris   per triangle (all K meshes, faces concatenated): to camera space,
+ *                      screen bounding box; a box of at most TILE x TILE pixels is covered
+ *                      here, a larger one is binned as (triangle, screen tile) pairs.
+ *   ndrf_raster_tiles  per binned pair: the triangle over the tile's pixels.
+ *   ndrf_resolve       per pixel and mesh: triangle id, Embree (u, v) and depth along the
+ *                      unit ray, recomputed from the pixel ray and the triangle.
+ *
+ * Coverage is exact ray-triangle coverage in camera space (homogeneous rasterisation,
+ * Olano & Greer 1997): with camera-space vertices v0, v1, v2 and the pixel ray
+ * r = (a, b, -1) of kernels/camera.h, the edge functions E_ij = (v_i x v_j) . r all share
+ * the sign of V = det(v0, v1, v2) exactly when the ray's line crosses the triangle in
+ * front of the camera (t = V / (E_01 + E_12 + E_20) > 0). No near plane is needed: a
+ * triangle crossing the camera plane is neither dropped nor clipped, its pixels are those
+ * Embree (tnear = 0) hits. A zero-area or edge-on triangle (V = 0) covers nothing.
+ * Tie rule: a pixel centre on an edge (E = 0) is covered only where the edge's normal
+ * c = sign(V) (v_i x v_j) is lexicographically positive. Two triangles sharing an edge,
+ * facing the same way, compute exactly opposite c (a cross product with swapped operands
+ * negates exactly without contraction), so such a pixel is covered exactly once.
+ *
+ * Depth test: per pixel and mesh a 64-bit key (depth bits << 32 | triangle), kept by
+ * atom_min (cl_khr_int64_extended_atomics): the nearest triangle, the smaller id on a tie.
+ * depth is the camera-space z distance V / E_sum (positive floats order as their bits).
+ * Without 64-bit atomics (ATOMICS64=0) two passes over the same triangles: pass 0 keeps
+ * the least depth bits per pixel (atomic_min on uint), pass 1 the least id among the
+ * triangles whose depth bits equal it; the same result.
+ *
+ * Buffers: keys (K, H, W) ulong (ATOMICS64) or depth_bits + ids (K, H, W) uint; pairs
+ * (capacity, 2) int (global triangle, tile) with the int counter n_pairs (may exceed the
+ * capacity: the host grows it and reruns); out tri (K, H, W) int (-1: miss), bary (K, H, W)
+ * float2, depth (K, H, W) float (inf on a miss).
+ * -D defines (clrender/ndrf/raster_cl.py): K, TILE (pixels a tile side), ATOMICS64.
+ */
+#include "camera.h"
+#pragma OPENCL FP_CONTRACT OFF
+
+#if !defined(K) || !defined(TILE) || !defined(ATOMICS64)
+#error "ndrf_raster.cl needs -D K TILE ATOMICS64"
+#endif
+#if ATOMICS64
+#pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
+#pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
+#define NO_HIT 0xffffffffffffffffUL
+#endif
+
+/* The visibility target of one frame: either the 64-bit keys or the two 32-bit planes. */
+typedef struct {
+#if ATOMICS64
+    volatile __global ulong *keys;
+#else
+    volatile __global uint *depth_bits;
+    volatile __global uint *ids;
+    int pass;
+#endif
+    int width, height;
+} Target;
+
+/* A triangle in camera space, ready to test pixels. */
+typedef struct {
+    float3 c0, c1, c2;     /* sign(V) (v1 x v2), sign(V) (v2 x v0), sign(V) (v0 x v1) */
+    float V;               /* |det(v0, v1, v2)| */
+    int x0, y0, x1, y1;    /* inclusive pixel bounds, clamped to the image */
+    int mesh, id;          /* mesh k and the face index within it */
+} Tri;
+
+inline float3 to_camera(__global const float *cam, float3 p)
+{
+    const float3 q = p - (float3)(cam[13], cam[14], cam[15]);
+    /* R^T q, R row-major at cam[4..12] */
+    return (float3)(cam[4] * q.x + cam[7] * q.y + cam[10] * q.z,
+                    cam[5] * q.x + cam[8] * q.y + cam[11] * q.z,
+                    cam[6] * q.x + cam[9] * q.y + cam[12] * q.z);
+}
+
+inline float3 cross3(float3 a, float3 b)
+{
+    return (float3)(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+
+/* The pixel column (or row) range [lo, hi] whose centres +0.5 can fall in [a, b]; one pixel
+ * of slack either side (the edge functions decide). */
+inline int2 pixel_range(float a, float b, int n)
+{
+    const float lo = fmax(floor(a - 0.5f) - 1.0f, 0.0f);
+    const float hi = fmin(ceil(b - 0.5f) + 1.0f, (float)(n - 1));
+    return (int2)((int)lo, (int)hi);
+}
+
+/* Triangle g of the concatenated faces: its mesh, camera-space edge normals and bounds.
+ * Returns 0 when it cannot cover a pixel (degenerate, behind the camera, off screen). */
+inline int tri_setup(int g, __global const float *cam, int width, int height,
+                     __global const int *face_start, __global const int *faces,
+                     __global const float *vertices, Tri *t)
+{
+    int k = 0;
+    while (k + 1 < K && g >= face_start[k + 1]) ++k;
+    t->mesh = k;
+    t->id = g - face_start[k];
+    const int3 f = vload3(g, faces);
+    const float3 v0 = to_camera(cam, vload3(f.x, vertices));
+    const float3 v1 = to_camera(cam, vload3(f.y, vertices));
+    const float3 v2 = to_camera(cam, vload3(f.z, vertices));
+    const float3 n12 = cross3(v1, v2), n20 = cross3(v2, v0), n01 = cross3(v0, v1);
+    const float V = v0.x * n12.x + v0.y * n12.y + v0.z * n12.z;
+    if (!(V != 0.0f) || (v0.z >= 0.0f && v1.z >= 0.0f && v2.z >= 0.0f)) return 0;
+    const float s = V > 0.0f ? 1.0f : -1.0f;
+    t->c0 = s * n12;
+    t->c1 = s * n20;
+    t->c2 = s * n01;
+    t->V = s * V;
+    /* Camera looks down -z: depth -z. A vertex at or behind the camera plane: the covered
+     * rays may lie anywhere on screen, bound by the image. */
+    const float eps = 1e-7f;
+    if (-v0.z <= eps || -v1.z <= eps || -v2.z <= eps) {
+        t->x0 = 0; t->y0 = 0; t->x1 = width - 1; t->y1 = height - 1;
+        return 1;
+    }
+    const float ax = v0.x / -v0.z, bx = v1.x / -v1.z, cx = v2.x / -v2.z;
+    const float ay = v0.y / -v0.z, by = v1.y / -v1.z, cy = v2.y / -v2.z;
+    /* pixel x + 0.5 = cx + fx a, y + 0.5 = cy - fy b (kernels/camera.h) */
+    const float sx0 = cam[2] + cam[0] * fmin(ax, fmin(bx, cx));
+    const float sx1 = cam[2] + cam[0] * fmax(ax, fmax(bx, cx));
+    const float sy0 = cam[3] - cam[1] * fmax(ay, fmax(by, cy));
+    const float sy1 = cam[3] - cam[1] * fmin(ay, fmin(by, cy));
+    if (sx1 < -1.0f || sy1 < -1.0f || sx0 > (float)width + 1.0f || sy0 > (float)height + 1.0f)
+        return 0;
+    const int2 xr = pixel_range(sx0, sx1, width), yr = pixel_range(sy0, sy1, height);
+    t->x0 = xr.x; t->x1 = xr.y; t->y0 = yr.x; t->y1 = yr.y;
+    return t->x0 <= t->x1 && t->y0 <= t->y1;
+}
+
+/* The edge c covers the pixel ray r: E > 0, or E == 0 on a lexicographically positive c. */
+inline int edge_covers(float3 c, float3 r)
+{
+    const float e = c.x * r.x + c.y * r.y + c.z * r.z;
+    return e > 0.0f || (e == 0.0f && (c.x > 0.0f || (c.x == 0.0f && (c.y > 0.0f ||
+                                      (c.y == 0.0f && c.z > 0.0f)))));
+}
+
+inline void write_hit(const Target *tg, int k, int p, float depth, int id)
+{
+    const int idx = k * tg->width * tg->height + p;
+    const uint bits = as_uint(depth);
+#if ATOMICS64
+    atom_min(tg->keys + idx, ((ulong)bits << 32) | (ulong)(uint)id);
+#else
+    if (tg->pass == 0) atomic_min(tg->depth_bits + idx, bits);
+    else if (tg->depth_bits[idx] == bits) atomic_min(tg->ids + idx, (uint)id);
+#endif
+}
+
+/* Cover the pixels of [x0, x1] x [y0, y1] (within the triangle's bounds) that t covers. */
+inline void cover(__global const float *cam, const Tri *t, const Target *tg, int x0, int y0,
+                  int x1, int y1)
+{
+    for (int py = max(y0, t->y0); py <= min(y1, t->y1); ++py) {
+        const float b = -(((float)py + 0.5f - cam[3]) / cam[1]);
+        for (int px = max(x0, t->x0); px <= min(x1, t->x1); ++px) {
+            const float3 r = (float3)(((float)px + 0.5f - cam[2]) / cam[0], b, -1.0f);
+            if (!edge_covers(t->c0, r) || !edge_covers(t->c1, r) || !edge_covers(t->c2, r))
+                continue;
+            const float3 n = t->c0 + t->c1 + t->c2;
+            const float e = n.x * r.x + n.y * r.y + n.z * r.z;
+            if (e > 0.0f) write_hit(tg, t->mesh, py * tg->width + px, t->V / e, t->id);
+        }
+    }
+}
+
+#if ATOMICS64
+#define TARGET_ARGS volatile __global ulong *keys
+#define TARGET_INIT {keys, width, height}
+#else
+#define TARGET_ARGS volatile __global uint *depth_bits, volatile __global uint *ids, \
+                    const int pass
+#define TARGET_INIT {depth_bits, ids, pass, width, height}
+#endif
+
+__kernel void ndrf_raster_clear(const int n, TARGET_ARGS)
+{
+    const int i = (int)get_global_id(0);
+    if (i >= n) return;
+#if ATOMICS64
+    keys[i] = NO_HIT;
+#else
+    if (pass == 0) depth_bits[i] = 0xffffffffu;
+    ids[i] = 0xffffffffu;
+#endif
+}
+
+__kernel void ndrf_raster_tris(__global const float *cam, const int width, const int height,
+                               const int n_faces, __global const int *face_start,
+                               __global const int *faces, __global const float *vertices,
+                               const int capacity, volatile __global int *n_pairs,
+                               __global int *pairs, TARGET_ARGS)
+{
+    const int g = (int)get_global_id(0);
+    if (g >= n_faces) return;
+    Tri t;
+    if (!tri_setup(g, cam, width, height, face_start, faces, vertices, &t)) return;
+    const Target tg = TARGET_INIT;
+    if (t.x1 - t.x0 < TILE && t.y1 - t.y0 < TILE) {
+        cover(cam, &t, &tg, t.x0, t.y0, t.x1, t.y1);
+        return;
+    }
+    const int tx0 = t.x0 / TILE, tx1 = t.x1 / TILE, ty0 = t.y0 / TILE, ty1 = t.y1 / TILE;
+    const int tiles_x = (width + TILE - 1) / TILE;
+    const int n = (tx1 - tx0 + 1) * (ty1 - ty0 + 1);
+    const int first = atomic_add(n_pairs, n);
+    for (int i = 0; i < n && first + i < capacity; ++i) {
+        const int tx = tx0 + i % (tx1 - tx0 + 1), ty = ty0 + i / (tx1 - tx0 + 1);
+        vstore2((int2)(g, ty * tiles_x + tx), first + i, pairs);
+    }
+}
+
+__kernel void ndrf_raster_tiles(__global const float *cam, const int width, const int height,
+                                __global const int *face_start, __global const int *faces,
+                                __global const float *vertices, const int n_pairs,
+                                __global const int *pairs, TARGET_ARGS)
+{
+    const int i = (int)get_global_id(0);
+    if (i >= n_pairs) return;
+    const int2 pair = vload2(i, pairs);
+    Tri t;
+    if (!tri_setup(pair.x, cam, width, height, face_start, faces, vertices, &t)) return;
+    const Target tg = TARGET_INIT;
+    const int tiles_x = (width + TILE - 1) / TILE;
+    const int x0 = (pair.y % tiles_x) * TILE, y0 = (pair.y / tiles_x) * TILE;
+    cover(cam, &t, &tg, x0, y0, x0 + TILE - 1, y0 + TILE - 1);
+}
+
+/* Embree's (u, v) and distance along the unit ray: Moller-Trumbore on the world-space
+ * triangle, clamped into the triangle (a pixel the edge test covered may sit a rounding
+ * error outside). */
+__kernel void ndrf_resolve(__global const float *cam, const int width, const int height,
+                           __global const int *face_start, __global const int *faces,
+                           __global const float *vertices,
+#if ATOMICS64
+                           __global const ulong *keys,
+#else
+                           __global const uint *ids,
+#endif
+                           __global int *tri, __global float *bary, __global float *depth)
+{
+    const int px = (int)get_global_id(0), py = (int)get_global_id(1);
+    if (px >= width || py >= height) return;
+    const int n = width * height;
+    const float3 o = camera_ray_origin(cam), d = camera_ray_dir(cam, px, py);
+    for (int k = 0; k < K; ++k) {
+        const int idx = k * n + py * width + px;
+#if ATOMICS64
+        const ulong key = keys[idx];
+        const int id = key == NO_HIT ? -1 : (int)(uint)(key & 0xffffffffUL);
+#else
+        const int id = ids[idx] == 0xffffffffu ? -1 : (int)ids[idx];
+#endif
+        float2 uv = (float2)(0.0f);
+        float t = INFINITY;
+        if (id >= 0) {
+            const int3 f = vload3(face_start[k] + id, faces);
+            const float3 p0 = vload3(f.x, vertices);
+            const float3 e1 = vload3(f.y, vertices) - p0, e2 = vload3(f.z, vertices) - p0;
+            const float3 pv = cross3(d, e2), tv = o - p0, qv = cross3(tv, e1);
+            const float det = e1.x * pv.x + e1.y * pv.y + e1.z * pv.z;
+            const float u = (tv.x * pv.x + tv.y * pv.y + tv.z * pv.z) / det;
+            const float v = (d.x * qv.x + d.y * qv.y + d.z * qv.z) / det;
+            t = (e2.x * qv.x + e2.y * qv.y + e2.z * qv.z) / det;
+            uv.x = clamp(u, 0.0f, 1.0f);
+            uv.y = clamp(v, 0.0f, 1.0f - uv.x);
+        }
+        tri[idx] = id;
+        vstore2(uv, idx, bary);
+        depth[idx] = t;
+    }
+}
