@@ -59,24 +59,28 @@ typedef struct {
 
 /* A triangle in camera space, ready to test pixels. */
 typedef struct {
-    float3 c0, c1, c2;     /* sign(V) (v1 x v2), sign(V) (v2 x v0), sign(V) (v0 x v1) */
+    float c[9];            /* sign(V) (v1 x v2), sign(V) (v2 x v0), sign(V) (v0 x v1) */
     float V;               /* |det(v0, v1, v2)| */
     int x0, y0, x1, y1;    /* inclusive pixel bounds, clamped to the image */
     int mesh, id;          /* mesh k and the face index within it */
 } Tri;
 
-inline float3 to_camera(__global const float *cam, float3 p)
+/* p (world) to camera space: R^T (p - origin), R row-major at cam[4..12], into v[0..2]. */
+inline void to_camera(__global const float *cam, __global const float *p, float *v)
 {
-    const float3 q = p - (float3)(cam[13], cam[14], cam[15]);
-    /* R^T q, R row-major at cam[4..12] */
-    return (float3)(cam[4] * q.x + cam[7] * q.y + cam[10] * q.z,
-                    cam[5] * q.x + cam[8] * q.y + cam[11] * q.z,
-                    cam[6] * q.x + cam[9] * q.y + cam[12] * q.z);
+    const float qx = p[0] - cam[13], qy = p[1] - cam[14], qz = p[2] - cam[15];
+    v[0] = cam[4] * qx + cam[7] * qy + cam[10] * qz;
+    v[1] = cam[5] * qx + cam[8] * qy + cam[11] * qz;
+    v[2] = cam[6] * qx + cam[9] * qy + cam[12] * qz;
 }
 
-inline float3 cross3(float3 a, float3 b)
+/* out = s (a x b) for 3-float a, b. Scalar arrays throughout this file, not float3: float3
+ * values built in these helpers crash the --uninitialized plugin of Oclgrind 21.10. */
+inline void cross_scaled(const float *a, const float *b, float s, float *out)
 {
-    return (float3)(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+    out[0] = s * (a[1] * b[2] - a[2] * b[1]);
+    out[1] = s * (a[2] * b[0] - a[0] * b[2]);
+    out[2] = s * (a[0] * b[1] - a[1] * b[0]);
 }
 
 /* The pixel column (or row) range [lo, hi] whose centres +0.5 can fall in [a, b]; one pixel
@@ -98,27 +102,26 @@ inline int tri_setup(int g, __global const float *cam, int width, int height,
     while (k + 1 < K && g >= face_start[k + 1]) ++k;
     t->mesh = k;
     t->id = g - face_start[k];
-    const int3 f = vload3(g, faces);
-    const float3 v0 = to_camera(cam, vload3(f.x, vertices));
-    const float3 v1 = to_camera(cam, vload3(f.y, vertices));
-    const float3 v2 = to_camera(cam, vload3(f.z, vertices));
-    const float3 n12 = cross3(v1, v2), n20 = cross3(v2, v0), n01 = cross3(v0, v1);
-    const float V = v0.x * n12.x + v0.y * n12.y + v0.z * n12.z;
-    if (!(V != 0.0f) || (v0.z >= 0.0f && v1.z >= 0.0f && v2.z >= 0.0f)) return 0;
+    float v[3][3];
+    for (int j = 0; j < 3; ++j) to_camera(cam, vertices + 3 * faces[3 * g + j], v[j]);
+    float n12[3];
+    cross_scaled(v[1], v[2], 1.0f, n12);
+    const float V = v[0][0] * n12[0] + v[0][1] * n12[1] + v[0][2] * n12[2];
+    if (!(V != 0.0f) || (v[0][2] >= 0.0f && v[1][2] >= 0.0f && v[2][2] >= 0.0f)) return 0;
     const float s = V > 0.0f ? 1.0f : -1.0f;
-    t->c0 = s * n12;
-    t->c1 = s * n20;
-    t->c2 = s * n01;
+    cross_scaled(v[1], v[2], s, t->c);
+    cross_scaled(v[2], v[0], s, t->c + 3);
+    cross_scaled(v[0], v[1], s, t->c + 6);
     t->V = s * V;
     /* Camera looks down -z: depth -z. A vertex at or behind the camera plane: the covered
      * rays may lie anywhere on screen, bound by the image. */
     const float eps = 1e-7f;
-    if (-v0.z <= eps || -v1.z <= eps || -v2.z <= eps) {
+    if (-v[0][2] <= eps || -v[1][2] <= eps || -v[2][2] <= eps) {
         t->x0 = 0; t->y0 = 0; t->x1 = width - 1; t->y1 = height - 1;
         return 1;
     }
-    const float ax = v0.x / -v0.z, bx = v1.x / -v1.z, cx = v2.x / -v2.z;
-    const float ay = v0.y / -v0.z, by = v1.y / -v1.z, cy = v2.y / -v2.z;
+    const float ax = v[0][0] / -v[0][2], bx = v[1][0] / -v[1][2], cx = v[2][0] / -v[2][2];
+    const float ay = v[0][1] / -v[0][2], by = v[1][1] / -v[1][2], cy = v[2][1] / -v[2][2];
     /* pixel x + 0.5 = cx + fx a, y + 0.5 = cy - fy b (kernels/camera.h) */
     const float sx0 = cam[2] + cam[0] * fmin(ax, fmin(bx, cx));
     const float sx1 = cam[2] + cam[0] * fmax(ax, fmax(bx, cx));
@@ -131,12 +134,13 @@ inline int tri_setup(int g, __global const float *cam, int width, int height,
     return t->x0 <= t->x1 && t->y0 <= t->y1;
 }
 
-/* The edge c covers the pixel ray r: E > 0, or E == 0 on a lexicographically positive c. */
-inline int edge_covers(float3 c, float3 r)
+/* The edge c (3 floats) covers the pixel ray r = (rx, ry, -1): E = c . r > 0, or E == 0 on a
+ * lexicographically positive c. */
+inline int edge_covers(const float *c, float rx, float ry)
 {
-    const float e = c.x * r.x + c.y * r.y + c.z * r.z;
-    return e > 0.0f || (e == 0.0f && (c.x > 0.0f || (c.x == 0.0f && (c.y > 0.0f ||
-                                      (c.y == 0.0f && c.z > 0.0f)))));
+    const float e = c[0] * rx + c[1] * ry - c[2];
+    return e > 0.0f || (e == 0.0f && (c[0] > 0.0f || (c[0] == 0.0f && (c[1] > 0.0f ||
+                                      (c[1] == 0.0f && c[2] > 0.0f)))));
 }
 
 inline void write_hit(const Target *tg, int k, int p, float depth, int id)
@@ -155,14 +159,16 @@ inline void write_hit(const Target *tg, int k, int p, float depth, int id)
 inline void cover(__global const float *cam, const Tri *t, const Target *tg, int x0, int y0,
                   int x1, int y1)
 {
+    const float nx = t->c[0] + t->c[3] + t->c[6], ny = t->c[1] + t->c[4] + t->c[7];
+    const float nz = t->c[2] + t->c[5] + t->c[8];
     for (int py = max(y0, t->y0); py <= min(y1, t->y1); ++py) {
-        const float b = -(((float)py + 0.5f - cam[3]) / cam[1]);
+        const float ry = -(((float)py + 0.5f - cam[3]) / cam[1]);
         for (int px = max(x0, t->x0); px <= min(x1, t->x1); ++px) {
-            const float3 r = (float3)(((float)px + 0.5f - cam[2]) / cam[0], b, -1.0f);
-            if (!edge_covers(t->c0, r) || !edge_covers(t->c1, r) || !edge_covers(t->c2, r))
+            const float rx = ((float)px + 0.5f - cam[2]) / cam[0];
+            if (!edge_covers(t->c, rx, ry) || !edge_covers(t->c + 3, rx, ry) ||
+                !edge_covers(t->c + 6, rx, ry))
                 continue;
-            const float3 n = t->c0 + t->c1 + t->c2;
-            const float e = n.x * r.x + n.y * r.y + n.z * r.z;
+            const float e = nx * rx + ny * ry - nz;
             if (e > 0.0f) write_hit(tg, t->mesh, py * tg->width + px, t->V / e, t->id);
         }
     }
@@ -208,9 +214,12 @@ __kernel void ndrf_raster_tris(__global const float *cam, const int width, const
     const int tiles_x = (width + TILE - 1) / TILE;
     const int n = (tx1 - tx0 + 1) * (ty1 - ty0 + 1);
     const int first = atomic_add(n_pairs, n);
+    /* Quotient and remainder written out: LLVM pairs a / and % of the same operands with a
+     * freeze instruction, which Oclgrind 21.10's --uninitialized plugin cannot run. */
+    const int nx = tx1 - tx0 + 1;
     for (int i = 0; i < n && first + i < capacity; ++i) {
-        const int tx = tx0 + i % (tx1 - tx0 + 1), ty = ty0 + i / (tx1 - tx0 + 1);
-        vstore2((int2)(g, ty * tiles_x + tx), first + i, pairs);
+        const int row = i / nx;
+        vstore2((int2)(g, (ty0 + row) * tiles_x + tx0 + (i - row * nx)), first + i, pairs);
     }
 }
 
@@ -226,13 +235,19 @@ __kernel void ndrf_raster_tiles(__global const float *cam, const int width, cons
     if (!tri_setup(pair.x, cam, width, height, face_start, faces, vertices, &t)) return;
     const Target tg = TARGET_INIT;
     const int tiles_x = (width + TILE - 1) / TILE;
-    const int x0 = (pair.y % tiles_x) * TILE, y0 = (pair.y / tiles_x) * TILE;
+    const int row = pair.y / tiles_x;                   /* no %: see ndrf_raster_tris */
+    const int x0 = (pair.y - row * tiles_x) * TILE, y0 = row * TILE;
     cover(cam, &t, &tg, x0, y0, x0 + TILE - 1, y0 + TILE - 1);
+}
+
+inline float dot3(const float *a, const float *b)
+{
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
 
 /* Embree's (u, v) and distance along the unit ray: Moller-Trumbore on the world-space
  * triangle, clamped into the triangle (a pixel the edge test covered may sit a rounding
- * error outside). */
+ * error outside). Scalar arrays for Oclgrind, as in cover(). */
 __kernel void ndrf_resolve(__global const float *cam, const int width, const int height,
                            __global const int *face_start, __global const int *faces,
                            __global const float *vertices,
@@ -246,7 +261,9 @@ __kernel void ndrf_resolve(__global const float *cam, const int width, const int
     const int px = (int)get_global_id(0), py = (int)get_global_id(1);
     if (px >= width || py >= height) return;
     const int n = width * height;
-    const float3 o = camera_ray_origin(cam), d = camera_ray_dir(cam, px, py);
+    float o[3], d[3];
+    vstore3(camera_ray_origin(cam), 0, o);
+    vstore3(camera_ray_dir(cam, px, py), 0, d);
     for (int k = 0; k < K; ++k) {
         const int idx = k * n + py * width + px;
 #if ATOMICS64
@@ -255,22 +272,26 @@ __kernel void ndrf_resolve(__global const float *cam, const int width, const int
 #else
         const int id = ids[idx] == 0xffffffffu ? -1 : (int)ids[idx];
 #endif
-        float2 uv = (float2)(0.0f);
-        float t = INFINITY;
+        float u = 0.0f, v = 0.0f, t = INFINITY;
         if (id >= 0) {
-            const int3 f = vload3(face_start[k] + id, faces);
-            const float3 p0 = vload3(f.x, vertices);
-            const float3 e1 = vload3(f.y, vertices) - p0, e2 = vload3(f.z, vertices) - p0;
-            const float3 pv = cross3(d, e2), tv = o - p0, qv = cross3(tv, e1);
-            const float det = e1.x * pv.x + e1.y * pv.y + e1.z * pv.z;
-            const float u = (tv.x * pv.x + tv.y * pv.y + tv.z * pv.z) / det;
-            const float v = (d.x * qv.x + d.y * qv.y + d.z * qv.z) / det;
-            t = (e2.x * qv.x + e2.y * qv.y + e2.z * qv.z) / det;
-            uv.x = clamp(u, 0.0f, 1.0f);
-            uv.y = clamp(v, 0.0f, 1.0f - uv.x);
+            const int g = face_start[k] + id;
+            float p0[3], e1[3], e2[3], tv[3], pv[3], qv[3];
+            for (int j = 0; j < 3; ++j) {
+                p0[j] = vertices[3 * faces[3 * g] + j];
+                e1[j] = vertices[3 * faces[3 * g + 1] + j] - p0[j];
+                e2[j] = vertices[3 * faces[3 * g + 2] + j] - p0[j];
+                tv[j] = o[j] - p0[j];
+            }
+            cross_scaled(d, e2, 1.0f, pv);
+            cross_scaled(tv, e1, 1.0f, qv);
+            const float det = dot3(e1, pv);
+            u = clamp(dot3(tv, pv) / det, 0.0f, 1.0f);
+            v = clamp(dot3(d, qv) / det, 0.0f, 1.0f - u);
+            t = dot3(e2, qv) / det;
         }
         tri[idx] = id;
-        vstore2(uv, idx, bary);
+        bary[2 * idx] = u;
+        bary[2 * idx + 1] = v;
         depth[idx] = t;
     }
 }

@@ -5,9 +5,7 @@ NGP-RT: generates camera rays (kernels/camera.cl) and renders a tiny random mode
 8x8 pixels) with every aggregation variant, both scene types (unbounded: from inside the
 unit cube and from the contracted shell): the exact build with G on and off, the fast build
 with 1 and with 16 rays / pixels per work-item (the one-lane builds must march the same
-points, and some). NDRF: shades
-a tiny random model (K=2, 10x8 pixels, hits on the image border and misses) with both
-kernel sizes and both conv0 organisations, two frames each (kernels/ndrf_shade.cl). Each
+points, and some); NDRF's kernels: tests/test_oclgrind_ndrf.py. Each
 runs in a subprocess run by ``oclgrind --check-api --data-races --uninitialized``. One
 report is expected and ignored: pyopencl, when it builds or fetches a kernel, asks
 ``clGetDeviceInfo`` for a property Oclgrind 21.10 does not implement (CL_INVALID_VALUE for
@@ -99,43 +97,3 @@ def test_kernels_clean_under_oclgrind():
     assert len(occupied) == 18, occupied
     for view, counts in occupied.items():
         assert len(counts) == 1 and min(marched[view]) > 0, (view, counts, marched[view])
-
-
-NDRF_SCRIPT = """
-from clrender.camera import Camera, look_at
-from clrender.ndrf import shader_cl
-from clrender.ndrf.config import NDRFConfig
-from clrender.ndrf.hits import HitCaster
-from clrender.ndrf.random_model import random_ndrf_model
-
-# Hits reach the right and bottom borders (the bottom-right corner too), misses remain.
-camera = Camera.from_fov(0.8, 10, 8, look_at([1.6, -1.2, 0.7], [-0.4, 0.4, 0.45]))
-keep = []  # see the module doc: no buffer is released while Oclgrind watches
-# Both conv0 organisations: one pixel per work-item (GPUs) and 8 per work-item (AVX-512
-# CPUs, reading the screen buffer's padding columns).
-for layout in ({"H_VEC": 8, "ACCUMULATORS": 0}, {"H_VEC": 16, "ACCUMULATORS": 16}):
-    shader_cl.device_layout = lambda device, layout=layout: dict(layout)
-    for kernel_size in (2, 1):
-        config = NDRFConfig(thresholds=(1e-4, 1e-2), kernel_size=kernel_size)
-        model = random_ndrf_model(config, 0)
-        hits = HitCaster(model).cast_camera(camera)
-        keep.append(shader_cl.Shader(model))
-        for frame in range(2):
-            rgb, ms = keep[-1].shade(camera, hits.tri, hits.bary)
-        print("RENDERED", keep[-1].defines["PIX"], kernel_size,
-              round(float(hits.coverage.mean()), 3),
-              bool(hits.coverage[-1, -1]), flush=True)
-"""
-
-
-@pytest.mark.oclgrind
-@pytest.mark.skipif(shutil.which("oclgrind") is None,
-                    reason="the oclgrind executable is not on PATH (apt install oclgrind)")
-def test_ndrf_kernels_clean_under_oclgrind():
-    proc, log, errors = _oclgrind(NDRF_SCRIPT)
-    assert proc.returncode == 0, f"oclgrind run failed ({proc.returncode}):\n{log[-4000:]}"
-    assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])
-    rendered = [line.split() for line in log.splitlines() if line.startswith("RENDERED")]
-    assert len(rendered) == 4, log[-4000:]
-    assert {r[1] for r in rendered} == {"1", "8"}, rendered
-    assert all(0.0 < float(r[3]) < 1.0 and r[4] == "True" for r in rendered), rendered

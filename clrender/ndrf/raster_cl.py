@@ -85,6 +85,7 @@ class Rasteriser:
                      for name, a in geometry.items()}
         self._n_pairs = cl.Buffer(rt.context, mf.READ_WRITE, 4)
         self._capacity = 0
+        self.binned_pairs = 0        # (triangle, tile) pairs the last frame binned
         self._size = None
         self._bufs: dict = {}
         self._local: dict = {}
@@ -149,6 +150,7 @@ class Rasteriser:
             if count[0] <= self._capacity:
                 break
             capacity = int(count[0])
+        self.binned_pairs = int(count[0])
         ev_tiles = self._run("ndrf_raster_tiles", (max(int(count[0]), 1),), b["cam"], w, h,
                              g["face_start"], g["faces"], g["vertices"], np.int32(count[0]),
                              pairs, *self._target(b, pass_))
