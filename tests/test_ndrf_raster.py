@@ -179,3 +179,15 @@ def test_trained_student_raster_matches_embree(tiny_ndrf_student):
         _check_hits(meshes, camera, raster.rasteriser.hits(camera),
                     embree.caster.cast_camera(camera))
         assert psnr(raster.render(camera)["rgb"], embree.render(camera)["rgb"]) >= IMAGE_DB
+
+
+def test_embree_on_threads_equals_one_thread(monkeypatch):
+    from clrender.ndrf import hits as hits_module
+
+    monkeypatch.setattr(hits_module, "MIN_CHUNK", 1000)      # several chunks a mesh
+    model = _model(2)
+    camera = Camera.from_fov(0.9, 96, 72, _views(model)["orbit"][1])
+    one, many = HitCaster(model, threads=1), HitCaster(model, threads=3)
+    a, b = one.cast_camera(camera), many.cast_camera(camera)
+    for x, y in ((a.tri, b.tri), (a.bary, b.bary), (a.depth, b.depth)):
+        np.testing.assert_array_equal(x, y)

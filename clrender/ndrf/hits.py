@@ -8,6 +8,8 @@ References: NDRF (Wan et al., CVPR 2023) §3.1, §3.4 (rasterisation replaced by
 """
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,6 +19,7 @@ from embreex.mesh_construction import TriangleMesh
 from ..camera import Camera, generate_rays
 
 F32 = np.float32
+MIN_CHUNK = 1 << 15          # rays a thread casts at least (smaller batches cost more than they save)
 
 
 @dataclass
@@ -46,9 +49,12 @@ class HitCaster:
     Args:
         meshes: ``[(vertices (V, 3), faces (F, 3)), ...]`` or an object with ``.config.K``
             and ``.mesh(k)`` (an :class:`clrender.ndrf.baked.NDRFModel`).
+        threads: casting threads (embreex releases the GIL while Embree traverses); default
+            the machine's cores.
     """
 
-    def __init__(self, meshes):
+    def __init__(self, meshes, threads: int | None = None):
+        self.threads = max(1, threads or os.cpu_count() or 1)
         if hasattr(meshes, "mesh"):
             meshes = [meshes.mesh(k)[:2] for k in range(meshes.config.K)]
         self._scenes = []
@@ -69,16 +75,26 @@ class HitCaster:
         tri = np.full((self.K, len(o)), -1, np.int32)
         bary = np.zeros((self.K, len(o), 2), F32)
         depth = np.full((self.K, len(o)), np.inf, F32)
-        for k, scene in enumerate(self._scenes):
-            if len(o) == 0:
-                break
-            res = scene.run(o, d, output=1)
+        n = len(o)
+        chunk = max(MIN_CHUNK, -(-n // self.threads))
+        jobs = [(k, a, min(a + chunk, n)) for k in range(self.K) for a in range(0, n, chunk)]
+
+        def cast_one(job):
+            k, a, b = job
+            res = self._scenes[k].run(o[a:b], d[a:b], output=1)
             prim = np.asarray(res["primID"], np.int64)
-            hit = prim >= 0
-            tri[k, hit] = prim[hit]
-            bary[k, hit, 0] = np.asarray(res["u"], F32)[hit]
-            bary[k, hit, 1] = np.asarray(res["v"], F32)[hit]
-            depth[k, hit] = np.asarray(res["tfar"], F32)[hit]
+            hit = np.flatnonzero(prim >= 0) + a
+            tri[k, hit] = prim[hit - a]
+            bary[k, hit, 0] = np.asarray(res["u"], F32)[hit - a]
+            bary[k, hit, 1] = np.asarray(res["v"], F32)[hit - a]
+            depth[k, hit] = np.asarray(res["tfar"], F32)[hit - a]
+
+        if len(jobs) > 1 and self.threads > 1:
+            with ThreadPoolExecutor(min(self.threads, len(jobs))) as pool:
+                list(pool.map(cast_one, jobs))
+        else:
+            for job in jobs:
+                cast_one(job)
         return Hits(tri.reshape((self.K,) + shape), bary.reshape((self.K,) + shape + (2,)),
                     depth.reshape((self.K,) + shape))
 
