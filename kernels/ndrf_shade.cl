@@ -22,12 +22,14 @@
  * -D defines (clrender/ndrf/shader_cl.py:kernel_defines): from NDRFConfig K, FEATURES,
  * C_IN, HIDDEN, N_FREQ, KSIZE; for the device H_VEC (8 or 16: floats per hidden-channel
  * vector), H_BLOCK (vectors per block of outputs kept in registers), H_STRIDE (HIDDEN
- * rounded up to whole blocks) and PIX (adjacent pixels per conv0 work-item); FAST_MATH
- * (native sin, cos, exp). Weights, zero-padded to H_STRIDE:
+ * rounded up to whole blocks), PIX (adjacent pixels whose outputs conv0 accumulates at once)
+ * and SEG (adjacent pixels per conv0 work-item, a multiple of PIX); FAST_MATH
+ * (the view encoding by double-angle identities, native exp). Weights, zero-padded to H_STRIDE:
  *   w0 (KSIZE*KSIZE, C_IN, H_STRIDE) [tap, in, out], b0 (H_STRIDE),
  *   w1 (KSIZE*KSIZE, 3, H_STRIDE) [tap, out, in], b1 (3).
- * Speed: conv0 vectorises across output channels; each weight vector, read once per
- * work-item, serves PIX pixels, whose (PIX + PAD) x KSIZE screen pixels are gathered once.
+ * Speed: conv0 vectorises across output channels; each weight vector, loaded once per
+ * block, serves PIX pixels; a work-item gathers the (SEG + PAD) x KSIZE screen pixels of its
+ * SEG outputs once.
  * Plain a * b + c: mad()/fma() are several times slower on PoCL (DESIGN.md, performance
  * notes).
  */
@@ -36,8 +38,11 @@
 
 #if !defined(K) || !defined(FEATURES) || !defined(C_IN) || !defined(HIDDEN) || \
     !defined(N_FREQ) || !defined(KSIZE) || !defined(H_VEC) || !defined(H_BLOCK) || \
-    !defined(H_STRIDE) || !defined(PIX) || !defined(FAST_MATH)
-#error "ndrf_shade.cl needs -D K FEATURES C_IN HIDDEN N_FREQ KSIZE H_VEC H_BLOCK H_STRIDE PIX FAST_MATH"
+    !defined(H_STRIDE) || !defined(PIX) || !defined(SEG) || !defined(FAST_MATH)
+#error "ndrf_shade.cl needs -D K FEATURES C_IN HIDDEN N_FREQ KSIZE H_VEC H_BLOCK H_STRIDE PIX SEG FAST_MATH"
+#endif
+#if SEG % PIX != 0
+#error "SEG must be a multiple of PIX"
 #endif
 #if FEATURES != 8
 #error "the gather reads the per-vertex features as float8"
@@ -62,12 +67,8 @@ typedef float16 hvec;
 #endif
 
 #if FAST_MATH
-#define NDRF_SIN native_sin
-#define NDRF_COS native_cos
 #define NDRF_EXP native_exp
 #else
-#define NDRF_SIN sin
-#define NDRF_COS cos
 #define NDRF_EXP exp
 #endif
 
@@ -104,6 +105,24 @@ inline int ndrf_covered(const Frame *f, int p)
     return 0;
 }
 
+#if FAST_MATH
+/* d, then sin(2^i d), cos(2^i d) for i < N_FREQ by the double-angle identities from one
+ * sin/cos of d: sin 2a = 2 sin a cos a, cos 2a = 1 - 2 sin^2 a (the fast build; each
+ * doubling doubles the angle's rounding error, ~1e-6 after four, far below what the
+ * >= 50 dB against the exact build allows). */
+inline void ndrf_view_encoding(float3 d, float *v)
+{
+    vstore3(d, 0, v);
+    float4 s = native_sin((float4)(d, 0.0f)), c = native_cos((float4)(d, 0.0f));
+    for (int i = 0; i < N_FREQ; ++i) {
+        vstore3(s.xyz, 0, v + 3 + 6 * i);
+        vstore3(c.xyz, 0, v + 6 + 6 * i);
+        const float4 s2 = 2.0f * s * c;
+        c = 1.0f - 2.0f * s * s;
+        s = s2;
+    }
+}
+#else
 /* d, then sin(2^i d), cos(2^i d) for i < N_FREQ (2^i d: exact scaling, as in the
  * reference), five frequencies at a time: one float16 call vectorises where a scalar call
  * per channel does not (PoCL: ~30x faster). sincos() would save a little more but breaks
@@ -120,14 +139,15 @@ inline void ndrf_view_encoding(float3 d, float *v)
         }
         a[15] = 0.0f;
         const float16 a16 = vload16(0, a);
-        vstore16(NDRF_SIN(a16), 0, sa);
-        vstore16(NDRF_COS(a16), 0, ca);
+        vstore16(sin(a16), 0, sa);
+        vstore16(cos(a16), 0, ca);
         for (int i = 0; i < 5 && i0 + i < N_FREQ; ++i) {
             vstore3(vload3(i, sa), 0, v + 3 + 6 * (i0 + i));
             vstore3(vload3(i, ca), 0, v + 6 + 6 * (i0 + i));
         }
     }
 }
+#endif
 
 /* The C_IN screen channels of pixel (px, py) into out; all zeros outside the image. */
 inline void ndrf_screen_pixel(const Frame *f, int px, int py, float *out)
@@ -176,11 +196,11 @@ __kernel void ndrf_screen(FRAME_ARGS, __global float *screen)
     for (int c = 0; c < C_IN; ++c) screen[(size_t)(py * width + px) * C_IN + c] = out[c];
 }
 
-/* Whether conv1 reads hidden at any of pixels (x0..x0+PIX-1, y0) for a covered pixel: the
+/* Whether conv1 reads hidden at any of pixels (x0..x0+SEG-1, y0) for a covered pixel: the
  * readers of (x, y) are (x..x+PAD, y..y+PAD). */
 inline int ndrf_hidden_needed(const Frame *f, int x0, int y0)
 {
-    const int x1 = min(x0 + PIX + PAD, f->width), y1 = min(y0 + KSIZE, f->height);
+    const int x1 = min(x0 + SEG + PAD, f->width), y1 = min(y0 + KSIZE, f->height);
     for (int y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x)
             if (ndrf_covered(f, y * f->width + x)) return 1;
@@ -195,34 +215,36 @@ inline hvec ndrf_relu(hvec x)
 __kernel void ndrf_conv0(FRAME_ARGS, __global const float *w0, __global const float *b0,
                          __global float *hidden)
 {
-    const int x0 = (int)get_global_id(0) * PIX, py = (int)get_global_id(1);
+    const int x0 = (int)get_global_id(0) * SEG, py = (int)get_global_id(1);
     if (x0 >= width || py >= height) return;
     const Frame f = FRAME_INIT;
     if (!ndrf_hidden_needed(&f, x0, py)) return;
-    float in[KSIZE][PIX + PAD][C_IN];
+    float in[KSIZE][SEG + PAD][C_IN];
     for (int dy = 0; dy < KSIZE; ++dy)
-        for (int i = 0; i < PIX + PAD; ++i) ndrf_screen_pixel(&f, x0 + i, py + dy, in[dy][i]);
-    for (int j0 = 0; j0 < H_STRIDE / H_VEC; j0 += H_BLOCK) {
-        hvec acc[PIX][H_BLOCK];
-        for (int q = 0; q < PIX; ++q)
-            for (int j = 0; j < H_BLOCK; ++j) acc[q][j] = vload_h(j0 + j, b0);
-        for (int dy = 0; dy < KSIZE; ++dy) {
-            for (int dx = 0; dx < KSIZE; ++dx) {
-                __global const float *w =
-                    w0 + (dy * KSIZE + dx) * C_IN * H_STRIDE + H_VEC * j0;
-                for (int c = 0; c < C_IN; ++c) {
-                    for (int j = 0; j < H_BLOCK; ++j) {
-                        const hvec wv = vload_h(j, w + c * H_STRIDE);
-                        for (int q = 0; q < PIX; ++q)
-                            acc[q][j] = acc[q][j] + in[dy][q + dx][c] * wv;
+        for (int i = 0; i < SEG + PAD; ++i) ndrf_screen_pixel(&f, x0 + i, py + dy, in[dy][i]);
+    for (int q0 = 0; q0 < SEG && x0 + q0 < width; q0 += PIX) {
+        for (int j0 = 0; j0 < H_STRIDE / H_VEC; j0 += H_BLOCK) {
+            hvec acc[PIX][H_BLOCK];
+            for (int q = 0; q < PIX; ++q)
+                for (int j = 0; j < H_BLOCK; ++j) acc[q][j] = vload_h(j0 + j, b0);
+            for (int dy = 0; dy < KSIZE; ++dy) {
+                for (int dx = 0; dx < KSIZE; ++dx) {
+                    __global const float *w =
+                        w0 + (dy * KSIZE + dx) * C_IN * H_STRIDE + H_VEC * j0;
+                    for (int c = 0; c < C_IN; ++c) {
+                        for (int j = 0; j < H_BLOCK; ++j) {
+                            const hvec wv = vload_h(j, w + c * H_STRIDE);
+                            for (int q = 0; q < PIX; ++q)
+                                acc[q][j] = acc[q][j] + in[dy][q0 + q + dx][c] * wv;
+                        }
                     }
                 }
             }
-        }
-        for (int q = 0; q < PIX && x0 + q < width; ++q) {
-            __global float *h =
-                hidden + ((size_t)(py + PAD) * (width + PAD) + x0 + q + PAD) * H_STRIDE;
-            for (int j = 0; j < H_BLOCK; ++j) vstore_h(ndrf_relu(acc[q][j]), j0 + j, h);
+            for (int q = 0; q < PIX && x0 + q0 + q < width; ++q) {
+                __global float *h = hidden + ((size_t)(py + PAD) * (width + PAD) + x0 + q0 + q
+                                              + PAD) * H_STRIDE;
+                for (int j = 0; j < H_BLOCK; ++j) vstore_h(ndrf_relu(acc[q][j]), j0 + j, h);
+            }
         }
     }
 }

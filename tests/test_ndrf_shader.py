@@ -87,10 +87,11 @@ def test_shade_matches_reference(K, kernel_size):
 
 
 # Organisations of conv0 (kernel_defines): GPU-style one pixel per work-item, AVX2-style
-# float8, AVX-512-style float16; model shapes whose hidden width is not a whole block
+# float8, AVX-512-style float16 (8 pixels a work-item), a segment that is not a multiple of
+# the pixels accumulated at once (rounded up); model shapes whose hidden width is not a whole block
 # (20), needs two blocks (48), and view encodings of 7 frequencies (two float16 chunks).
-LAYOUTS = [{"H_VEC": 8, "ACCUMULATORS": 0}, {"H_VEC": 8, "ACCUMULATORS": 8},
-           {"H_VEC": 16, "ACCUMULATORS": 16}]
+LAYOUTS = [{"H_VEC": 8, "ACCUMULATORS": 0, "SEG": 1}, {"H_VEC": 8, "ACCUMULATORS": 8, "SEG": 8},
+           {"H_VEC": 16, "ACCUMULATORS": 16, "SEG": 8}, {"H_VEC": 8, "ACCUMULATORS": 8, "SEG": 3}]
 SHAPES = [dict(thresholds=THRESHOLDS, hidden=20, n_freq=7, kernel_size=2),
           dict(thresholds=THRESHOLDS[:2], hidden=48, n_freq=3, kernel_size=1),
           dict(thresholds=THRESHOLDS[:1], hidden=48, n_freq=0, kernel_size=2)]

@@ -36,9 +36,10 @@ for atomics64 in (True, False):
               flush=True)
 hits = Rasteriser(model).hits(views["border"])
 keep.append(hits)
-# Both conv0 organisations: one pixel per work-item (GPUs) and 8 per work-item (AVX-512
-# CPUs, gathering past the image's right edge).
-for layout in ({"H_VEC": 8, "ACCUMULATORS": 0}, {"H_VEC": 16, "ACCUMULATORS": 16}):
+# Both conv0 organisations: one pixel per work-item (GPUs) and 8 per work-item (CPUs,
+# gathering past the image's right edge).
+for layout in ({"H_VEC": 8, "ACCUMULATORS": 0, "SEG": 1},
+               {"H_VEC": 16, "ACCUMULATORS": 16, "SEG": 8}):
     shader_cl.device_layout = lambda device, layout=layout: dict(layout)
     for kernel_size in (2, 1):
         for exact in (True, False):

@@ -41,35 +41,39 @@ def _round_up(n: int, m: int) -> int:
 
 
 def device_layout(device: cl.Device) -> dict:
-    """How conv0 is organised on ``device``: ``H_VEC`` floats per vector and
-    ``ACCUMULATORS``, the vectors a work-item may keep accumulating (0: one pixel each).
+    """How conv0 is organised on ``device``: ``H_VEC`` floats per vector, ``ACCUMULATORS``,
+    the vectors a work-item may keep accumulating (0: one pixel each), and ``SEG``, the
+    pixels a work-item shades (it gathers their screen pixels once).
 
     CPUs: vectors as wide as the device prefers (16 floats with AVX-512, else 8) and about
     half the vector registers (32 zmm or 16 ymm) as accumulators, so each weight vector,
-    loaded once, feeds several pixels. GPUs: one pixel per work-item, parallelism from the
-    work-items themselves.
+    loaded once, feeds several pixels; 8 pixels a work-item, so the gather of the 2x2 conv's
+    neighbours is shared (9 x 2 screen pixels for 8 outputs). GPUs: one pixel per work-item,
+    parallelism from the work-items themselves.
     """
     if device_type_name(device) == "GPU":
-        return {"H_VEC": 8, "ACCUMULATORS": 0}
+        return {"H_VEC": 8, "ACCUMULATORS": 0, "SEG": 1}
     wide = device.preferred_vector_width_float >= 16
-    return {"H_VEC": 16 if wide else 8, "ACCUMULATORS": 16 if wide else 8}
+    return {"H_VEC": 16 if wide else 8, "ACCUMULATORS": 16 if wide else 8, "SEG": 8}
 
 
-def kernel_defines(config: NDRFConfig, h_vec: int = 8, accumulators: int = 0) -> dict:
+def kernel_defines(config: NDRFConfig, h_vec: int = 8, accumulators: int = 0,
+                   seg: int = 1) -> dict:
     """The ``-D`` defines of ``kernels/ndrf_shade.cl`` for a model config.
 
     The model constants (K, FEATURES, C_IN, HIDDEN, N_FREQ, KSIZE) come from the config;
     the layout follows from :func:`device_layout`, here and nowhere else: conv0 computes
     blocks of up to BLOCK_FLOATS output channels (H_BLOCK vectors of H_VEC floats) for PIX
-    adjacent pixels, PIX * H_BLOCK accumulators; H_STRIDE is the hidden width rounded up
-    to whole blocks.
+    adjacent pixels, PIX * H_BLOCK accumulators, SEG pixels (rounded up to a multiple of
+    PIX) a work-item; H_STRIDE is the hidden width rounded up to whole blocks.
     """
     h_block = max(1, min(BLOCK_FLOATS // h_vec, -(-config.hidden // h_vec)))
+    pix = max(1, accumulators // h_block)
     return {"K": config.K, "FEATURES": FEATURES, "C_IN": config.c_in,
             "HIDDEN": config.hidden, "N_FREQ": config.n_freq, "KSIZE": config.kernel_size,
             "H_VEC": int(h_vec), "H_BLOCK": h_block,
             "H_STRIDE": _round_up(config.hidden, h_vec * h_block),
-            "PIX": max(1, accumulators // h_block)}
+            "PIX": pix, "SEG": _round_up(max(1, seg), pix)}
 
 
 def packed_meshes(model) -> dict:
@@ -115,7 +119,8 @@ class Shader:
         self.runtime = rt = get_runtime(device)
         self.exact = bool(exact)
         layout = device_layout(rt.device)
-        self.defines = kernel_defines(self.config, layout["H_VEC"], layout["ACCUMULATORS"])
+        self.defines = kernel_defines(self.config, layout["H_VEC"], layout["ACCUMULATORS"],
+                                      layout.get("SEG", 1))
         program = rt.program("ndrf_shade.cl", self.defines, self.exact)
         self._kernels = {name: program.kernel(name) for name in KERNELS}
         self._local: dict = {}
@@ -216,8 +221,7 @@ class Shader:
         bg = [F32(c) for c in np.asarray(bg, np.float64).reshape(3)]
         cl.enqueue_copy(q, b["cam"], camera.packed())
         frame = self._frame_args(camera, tri_buf, bary_buf)
-        pix = self.defines["PIX"]
-        ev_conv0 = self._run("ndrf_conv0", -(-w // pix), h, *frame, m["w0"], m["b0"],
+        ev_conv0 = self._run("ndrf_conv0", -(-w // self.defines["SEG"]), h, *frame, m["w0"], m["b0"],
                              b["hidden"])
         ev_conv1 = self._run("ndrf_conv1", w, h, *frame, b["hidden"], m["w1"], m["b1"], *bg,
                              b["rgb"])
