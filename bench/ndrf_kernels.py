@@ -1,59 +1,112 @@
-"""Per-stage timings of the NDRF renderer, and its OpenCL shading against the numpy reference.
+"""Per-stage timings of the NDRF renderer against their bounds, for both hit sources.
 
-    python -m bench.ndrf_kernels                         # random K=2 model, 200 and 800 px
-    python -m bench.ndrf_kernels --model ndrf.npz --sizes 200 800 1920 --repeats 5
+    python -m bench.ndrf_kernels                          # random K=2 model, orbit, 200 and 800
+    python -m bench.ndrf_kernels --model ndrf.npz --data DIR [--teacher ngprt.npz]
 
-Renders one orbit view per size: Embree ray casting into the K meshes (``intersect``, wall
-time on the host), then the OpenCL passes ``gather``, ``conv0``, ``conv1`` (kernel times
-from profiling events); median and p10-p90 over the repeats after one warm-up frame. The
-numpy reference shades the same hits once per size; the ratio is reference shading time over
-OpenCL shading time (gather + conv0 + conv1), with the largest difference between the two
-images. Writes ``<out>/ndrf_kernels.{json,md}``. Never asserts.
+Random model: one orbit view per ``--sizes`` side. Trained model (``--model`` and ``--data``):
+the dataset's test cameras at the test size, 800x800 and 1920x1080 (``--frames``), each
+camera resized with :func:`bench.ngprt_kernels.at_size` (the vertical field of view and the
+pixel aspect kept: a square test camera at 1920x1080 sees a wider view, not a stretched
+one). Stages: ``intersect`` (the rasteriser's kernels, or Embree on the host plus the upload),
+``conv0`` (with the gather of the screen pixels) and ``conv1``, kernel times from profiling
+events; median and p10-p90 over every camera and repeat after one warm-up frame each.
+With ``--teacher`` the NGP-RT teacher renders the same cameras in the same run: the
+student's speed-up is the teacher's median frame time over the student's (raster path).
+
+Bounds, from this device's rates measured here (:mod:`bench.limits`): conv0 and conv1 from
+their FLOPs (every pixel conv0 computes, i.e. read by a covered pixel, times C_in x S^2 x
+H x 2; covered pixels times H x S^2 x 3 x 2) at the measured FLOP rate; the gather from its
+reads (each gathered screen pixel: per mesh hit, 3 vertex feature rows, float8) at the
+measured random-gather rate; the rasteriser is reported per triangle and per covered
+pixel-layer (it has no single bound: setup per triangle, edge tests per box pixel, one
+atomic per covered pixel and layer). Writes ``<out>/ndrf_kernels[_<model>].{json,md}``.
+Never asserts.
 """
 from __future__ import annotations
 
 import argparse
 import datetime
 import json
-import time
 from pathlib import Path
 
 import numpy as np
 
+from bench.limits import flop_rate, gather_rate
+from bench.ngprt_kernels import TRAINED_SIZES, _parse_size, at_size
 from clrender import methods
 from clrender.atomic import write_atomic
-from clrender.camera import generate_rays
+from clrender.data import load_dataset
 from clrender.metrics import summarize_ms
 from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.random_model import random_ndrf_model
-from clrender.ndrf.render import Renderer
-from clrender.ndrf.shader_ref import shade_reference
+from clrender.ndrf.render import HIT_SOURCES, Renderer
 from clrender.paths import path_cameras
+from clrender.renderer import Renderer as AnyRenderer
 
-STAGES = ("intersect", "gather", "conv0", "conv1")
+STAGES = ("intersect", "conv0", "conv1")
 
 
-def measure(renderer: Renderer, size: int, repeats: int) -> dict:
-    """Stage times (ms) of one orbit view at ``size`` x ``size``, and the reference ratio."""
-    camera = path_cameras("bounded", "orbit", 8, size, size)[1]
-    renderer.render(camera)                                    # warm-up: build, first touch
+def _spread(mask: np.ndarray, radius: int, step: int) -> np.ndarray:
+    """(H, W) bool: pixels p with ``mask`` at some p + step * (dx, dy), 0 <= dx, dy <=
+    radius (step 1: reached from below/right; -1: from above/left)."""
+    h, w = mask.shape
+    out = mask.copy()
+    for dy in range(radius + 1):
+        for dx in range(radius + 1):
+            src = mask[dy:, dx:] if step > 0 else mask[:h - dy, :w - dx]
+            if step > 0:
+                out[:h - dy, :w - dx] |= src
+            else:
+                out[dy:, dx:] |= src
+    return out
+
+
+def counters(model, out: dict) -> dict:
+    """What one frame must compute: conv0 / conv1 FLOPs and screen-pixel gathers."""
+    cfg = model.config
+    S, H, r = cfg.kernel_size, cfg.hidden, cfg.kernel_size - 1
+    coverage = out["coverage"] > 0
+    needed = _spread(coverage, r, 1)          # conv1 at p reads hidden at p - (0..r)
+    gathered = _spread(needed, r, -1)         # conv0 at p reads the screen at p + (0..r)
+    n_hits = float(out["n_hits"][gathered].sum())
+    return {"covered": int(coverage.sum()), "conv0_pixels": int(needed.sum()),
+            "conv0_flops": float(needed.sum()) * cfg.c_in * S * S * H * 2,
+            "conv1_flops": float(coverage.sum()) * H * S * S * 3 * 2,
+            "gathers": 3.0 * n_hits, "hit_layers": int(out["n_hits"].sum())}
+
+
+def measure(renderer, cameras, repeats: int) -> dict:
+    """Stage times over ``cameras`` x ``repeats`` (a warm-up frame each) and the counters of
+    the first camera."""
     times = {s: [] for s in STAGES + ("total",)}
-    for _ in range(repeats):
-        out = renderer.render(camera)
-        for s in STAGES:
-            times[s].append(out[f"ms_{s}"])
-        times["total"].append(out["ms"])
-    hits = renderer.caster.cast_camera(camera)
-    _, dirs = generate_rays(camera)
-    start = time.perf_counter()
-    ref = shade_reference(renderer.model, hits.tri, hits.bary, dirs, renderer.model.background)
-    ref_ms = (time.perf_counter() - start) * 1e3
-    shading = [g + a + b for g, a, b in zip(times["gather"], times["conv0"], times["conv1"])]
-    return {"size": size, **{s: summarize_ms(v) for s, v in times.items()},
-            "shading": summarize_ms(shading), "reference_shading_ms": ref_ms,
-            "vs_ref": ref_ms / float(np.median(shading)),
-            "max_abs_diff": float(np.abs(out["rgb"] - ref).max()),
-            "coverage": float((hits.tri >= 0).any(axis=0).mean())}
+    for camera in cameras:
+        renderer.render(camera)
+        for _ in range(repeats):
+            out = renderer.render(camera)
+            for s in STAGES:
+                times[s].append(out[f"ms_{s}"])
+            times["total"].append(out["ms"])
+    first = renderer.render(cameras[0], stats=True)
+    return {**{s: summarize_ms(v) for s, v in times.items()},
+            "counters": counters(renderer.model, first)}
+
+
+def teacher_ms(teacher_path, cameras, repeats: int, device=None) -> dict:
+    """The NGP-RT teacher's frame times over the same cameras (default render options)."""
+    renderer = AnyRenderer(teacher_path, device=device)
+    times = []
+    for camera in cameras:
+        renderer.render(camera)
+        times += [renderer.render(camera)["ms"] for _ in range(repeats)]
+    return summarize_ms(times)
+
+
+def bounds(row: dict, rates: dict) -> dict:
+    """Bound (ms) of each stage from its counters at the measured rates."""
+    c = row["counters"]
+    return {"conv0": c["conv0_flops"] / rates["flops_per_s"] * 1e3,
+            "conv1": c["conv1_flops"] / rates["flops_per_s"] * 1e3,
+            "gather": c["gathers"] / rates["gathers_per_s"] * 1e3}
 
 
 def _fmt(s: dict) -> str:
@@ -61,43 +114,62 @@ def _fmt(s: dict) -> str:
 
 
 def markdown(rows: list[dict], meta: dict) -> str:
-    head = ["size", "intersect ms", "gather ms", "conv0 ms", "conv1 ms", "total ms", "FPS",
-            "numpy ref shading ms", "CL shading vs ref", "max |CL - ref|", "coverage"]
+    head = ["frame", "hits", "intersect ms", "conv0 ms (bound)", "conv1 ms (bound)",
+            "total ms", "FPS", "raster ns / triangle, / hit", "teacher ms", "speed-up"]
     lines = ["## NDRF renderer stages", "",
-             f"{meta['device']}; {meta['model']}; orbit view; {meta['repeats']} repeats after a "
-             "warm-up (median, p10-p90). intersect: Embree on the host (wall time); the other "
-             "stages: OpenCL kernel times. CL shading vs ref: numpy reference shading time "
-             "over gather + conv0 + conv1.", "",
+             f"{meta['device']}; {meta['model']}; {meta['views']}; {meta['repeats']} repeats "
+             f"after a warm-up, median (p10-p90). Rates measured here: "
+             f"{meta['rates']['flops_per_s'] / 1e9:.0f} GFLOP/s, "
+             f"{meta['rates']['gathers_per_s'] / 1e9:.2f} G random float8 gathers/s. "
+             "Bounds: conv0 at the FLOP rate (its gather of the screen pixels adds "
+             "at least the gather bound in brackets), conv1 at the FLOP rate. Speed-up: the "
+             "NGP-RT teacher's median frame time over this row's, same cameras, same run.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        lines.append("| " + " | ".join(
-            [f"{r['size']}x{r['size']}"] + [_fmt(r[s]) for s in STAGES + ("total",)]
-            + [f"{1000.0 / r['total']['median']:.1f}", f"{r['reference_shading_ms']:.0f}",
-               f"{r['vs_ref']:.0f}x", f"{r['max_abs_diff']:.1e}", f"{r['coverage']:.2f}"]) + " |")
+        b, c, t = r["bound"], r["counters"], r["total"]["median"]
+        per_tri = (f"{r['intersect']['median'] * 1e6 / meta['faces']:.0f}, "
+                   f"{r['intersect']['median'] * 1e6 / max(c['hit_layers'], 1):.0f}"
+                   if r["hits"] == "raster" else "")
+        teacher = r.get("teacher")
+        lines.append("| " + " | ".join([
+            r["frame"], r["hits"], _fmt(r["intersect"]),
+            f"{_fmt(r['conv0'])} ({b['conv0']:.1f} + {b['gather']:.1f})",
+            f"{_fmt(r['conv1'])} ({b['conv1']:.1f})", _fmt(r["total"]), f"{1000.0 / t:.1f}",
+            per_tri, _fmt(teacher) if teacher else "",
+            f"{teacher['median'] / t:.2f}x" if teacher else ""]) + " |")
     return "\n".join(lines) + "\n"
 
 
-def run(sizes, repeats: int, out: Path, model_path=None, device=None, seed: int = 0) -> list[dict]:
-    if model_path is None:
-        model = random_ndrf_model(NDRFConfig(), seed)
-        what = f"random K=2 model (seed {seed})"
-    else:
-        model = methods.load(model_path)
-        what = str(model_path)
-    sizes_faces = ", ".join(f"{m['vertices']} V / {m['faces']} F" for m in model.mesh_sizes())
-    renderer = Renderer(model, device=device)
+def run(model, frames: dict, repeats: int, out: Path, name: str, views: str, device=None,
+        teacher=None) -> list[dict]:
+    """Measure ``model`` on ``frames`` ({label: cameras}) with both hit sources."""
+    renderers = {h: Renderer(model, device=device, hits=h) for h in HIT_SOURCES}
+    runtime = renderers["raster"].runtime
+    feature_bytes = sum(int(model.mesh(k)[2].nbytes) for k in range(model.config.K))
+    rates = {"flops_per_s": flop_rate(runtime), "gathers_per_s": gather_rate(feature_bytes,
+                                                                            runtime)}
     rows = []
-    for size in sizes:
-        rows.append(measure(renderer, size, repeats))
-        r = rows[-1]
-        print(f"{size:5d}px  total {r['total']['median']:7.1f} ms  intersect "
-              f"{r['intersect']['median']:6.1f}  shading {r['shading']['median']:6.1f}  "
-              f"ref {r['reference_shading_ms']:7.0f}", flush=True)
-    meta = {"device": renderer.runtime.name, "model": f"{what}: meshes {sizes_faces}",
-            "repeats": repeats, "date": datetime.datetime.now().isoformat(timespec="seconds")}
+    for label, cameras in frames.items():
+        t = teacher_ms(teacher, cameras, repeats, runtime) if teacher else None
+        for hits, renderer in renderers.items():
+            row = {"frame": label, "hits": hits, **measure(renderer, cameras, repeats)}
+            row["bound"] = bounds(row, rates)
+            if t and hits == "raster":
+                row["teacher"] = t
+            rows.append(row)
+            print(f"{label:>10s} {hits:6s} total {row['total']['median']:7.1f} ms  intersect "
+                  f"{row['intersect']['median']:6.1f}  conv0 {row['conv0']['median']:6.1f} "
+                  f"(bound {row['bound']['conv0']:.1f})", flush=True)
+    sizes = ", ".join(f"{m['vertices']} V / {m['faces']} F" for m in model.mesh_sizes())
+    meta = {"device": runtime.name, "hit_source": renderers["raster"].hit_source,
+            "model": f"{name}: meshes {sizes}", "faces": sum(m["faces"] for m in
+                                                             model.mesh_sizes()),
+            "views": views, "repeats": repeats, "rates": rates,
+            "date": datetime.datetime.now().isoformat(timespec="seconds")}
     text = markdown(rows, meta)
-    write_atomic(out / "ndrf_kernels.md", text)
-    write_atomic(out / "ndrf_kernels.json", json.dumps({"meta": meta, "rows": rows}, indent=2))
+    stem = "ndrf_kernels" + ("" if name.startswith("random") else "_" + Path(name).stem)
+    write_atomic(out / f"{stem}.md", text)
+    write_atomic(out / f"{stem}.json", json.dumps({"meta": meta, "rows": rows}, indent=2))
     print(text)
     return rows
 
@@ -105,13 +177,33 @@ def run(sizes, repeats: int, out: Path, model_path=None, device=None, seed: int 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench.ndrf_kernels", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--sizes", type=int, nargs="+", default=[200, 800], help="image sides")
-    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--sizes", type=int, nargs="+", default=[200, 800],
+                   help="image sides of the random model's orbit view")
     p.add_argument("--model", default=None, help="a baked NDRF file (default: a random model)")
+    p.add_argument("--data", default=None, type=Path, help="its dataset (test cameras)")
+    p.add_argument("--frames", nargs="+", default=list(TRAINED_SIZES),
+                   help="frame sizes WxH besides the test size (trained model)")
+    p.add_argument("--teacher", default=None, help="a baked NGP-RT model to time beside it")
+    p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--out", default="results", type=Path)
     p.add_argument("--device", default=None)
     args = p.parse_args(argv)
-    run(args.sizes, args.repeats, args.out, args.model, args.device)
+    if args.model is None:
+        model = random_ndrf_model(NDRFConfig(), 0)
+        frames = {f"{s}x{s}": [path_cameras("bounded", "orbit", 8, s, s)[1]] for s in args.sizes}
+        run(model, frames, args.repeats, args.out, "random K=2 model (seed 0)", "orbit view",
+            args.device, args.teacher)
+        return 0
+    if args.data is None:
+        p.error("--model needs --data (the dataset whose test cameras to render)")
+    model = methods.load(args.model)
+    cams = load_dataset(args.data, split="test").cameras
+    frames = {f"{cams[0].width}x{cams[0].height}": cams}
+    for text in args.frames:
+        w, h = _parse_size(text)
+        frames[f"{w}x{h}"] = [at_size(c, w, h) for c in cams]
+    run(model, frames, args.repeats, args.out, str(args.model),
+        f"{len(cams)} test cameras of {args.data}", args.device, args.teacher)
     return 0
 
 

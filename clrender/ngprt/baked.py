@@ -21,7 +21,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import binary_dilation, distance_transform_edt
 
 from .. import bakedfile
 from ..bakedfile import F32, I32, U8, BakedFormatError, check_arrays, fail
@@ -128,6 +127,9 @@ def build_distance_grid(occupancy_0: np.ndarray, G_res: int) -> np.ndarray:
     Returns:
         G: (G_res, G_res, G_res) uint8, in G-voxel units.
     """
+    # Imported here: loading and rendering a baked file need numpy and pyopencl alone.
+    from scipy.ndimage import binary_dilation, distance_transform_edt
+
     occ = _pool((np.asarray(occupancy_0) != 0).astype(np.uint8), G_res).astype(bool)
     if not occ.any():
         return np.full((G_res,) * 3, 255, np.uint8)

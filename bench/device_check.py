@@ -1,0 +1,166 @@
+"""Every OpenCL device of a machine renders both methods, checked against reference images.
+
+    python -m bench.device_check --make-reference .devcheck     # here, with PoCL: models + images
+    python -m bench.device_check --reference .devcheck --out results/   # on any machine
+
+``--make-reference`` writes a random NGP-RT model (``cpu`` preset, separate-v, L = 2) and a
+random NDRF model (K = 2) as baked files, and each one's render of an orbit view at 800x800
+and 1920x1080 on the chosen device (``$CLRENDER_DEVICE``, PoCL here) as reference images
+(uint16 in ``reference.npz``, with the device and date in ``reference.json``). The check
+then lists every platform and device, renders the same views of the same files on each,
+and reports per device, method and size the frame time (median of ``--repeats`` after a
+warm-up), the PSNR and largest difference against the reference, and writes
+``device_check.{md,json}``.
+
+It needs numpy, pyopencl and embreex only (no torch, scipy or scikit-image), so it runs on
+a machine that reaches no package registry with those three as wheels beside the folder
+the first command wrote. Never asserts.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+from clrender import methods
+from clrender.atomic import write_atomic
+from clrender.device import device_info, list_devices
+from clrender.metrics import psnr, summarize_ms
+from clrender.paths import path_cameras
+from clrender.renderer import Renderer
+
+SIZES = ((800, 800), (1920, 1080))
+MODELS = ("ngprt", "ndrf")
+
+
+def _camera(width: int, height: int):
+    return path_cameras("bounded", "orbit", 8, width, height)[1]
+
+
+def make_models(folder: Path) -> dict:
+    """The two random baked files (deterministic per seed): {method: path}."""
+    from clrender.ndrf.baked import save_baked as save_ndrf
+    from clrender.ndrf.config import NDRFConfig
+    from clrender.ndrf.random_model import random_ndrf_model
+    from clrender.ngprt.baked import save_baked as save_ngprt
+    from clrender.ngprt.config import preset
+    from clrender.ngprt.random_model import random_baked_model
+
+    folder.mkdir(parents=True, exist_ok=True)
+    ngprt = random_baked_model(preset("cpu", variant="separate-v", L=2), seed=0)
+    return {"ngprt": save_ngprt(ngprt, folder / "ngprt.npz"),
+            "ndrf": save_ndrf(random_ndrf_model(NDRFConfig(), seed=0), folder / "ndrf.npz")}
+
+
+def make_reference(folder: Path, device=None) -> None:
+    paths = make_models(folder)
+    images, where = {}, None
+    for method, path in paths.items():
+        renderer = Renderer(path, device=device)
+        where = renderer.device_name
+        for w, h in SIZES:
+            rgb = renderer.render(_camera(w, h))["rgb"]
+            images[f"{method}_{w}x{h}"] = np.round(np.clip(rgb, 0, 1) * 65535).astype(np.uint16)
+            print(f"reference {method} {w}x{h} on {where}", flush=True)
+    tmp = folder / "reference.tmp.npz"
+    np.savez_compressed(tmp, **images)
+    tmp.replace(folder / "reference.npz")
+    write_atomic(folder / "reference.json", json.dumps(
+        {"device": where, "date": datetime.datetime.now().isoformat(timespec="seconds"),
+         "sizes": [list(s) for s in SIZES]}, indent=2))
+
+
+def check_device(index: int, folder: Path, reference: dict, repeats: int) -> list[dict]:
+    """Rows for device ``index`` of :func:`list_devices`: each method and size, or the error."""
+    rows = []
+    for method in MODELS:
+        try:
+            renderer = Renderer(methods.load(folder / f"{method}.npz"), device=str(index))
+        except Exception as e:          # noqa: BLE001 - a device that cannot build is a finding
+            rows.append({"method": method, "error": f"{type(e).__name__}: {e}"})
+            continue
+        for w, h in SIZES:
+            row = {"method": method, "size": f"{w}x{h}"}
+            try:
+                camera = _camera(w, h)
+                rgb = renderer.render(camera)["rgb"]
+                row["ms"] = summarize_ms(renderer.render(camera)["ms"] for _ in range(repeats))
+                ref = reference[f"{method}_{w}x{h}"].astype(np.float32) / 65535
+                got = np.round(np.clip(rgb, 0, 1) * 65535).astype(np.float32) / 65535
+                row["psnr"] = float(psnr(got, ref))
+                row["max_abs_diff"] = float(np.abs(got - ref).max())
+            except Exception as e:      # noqa: BLE001
+                row["error"] = f"{type(e).__name__}: {e}"
+                traceback.print_exc()
+            rows.append(row)
+            print(index, row, flush=True)
+    return rows
+
+
+def markdown(devices: list[dict], meta: dict) -> str:
+    lines = ["## Device check", "",
+             f"Reference images: {meta['reference']['device']} ({meta['reference']['date']}); "
+             f"random `cpu` NGP-RT (separate-v, L = 2) and NDRF (K = 2) models, one orbit view; "
+             f"frame time: median of {meta['repeats']} after a warm-up (NGP-RT: kernel time; "
+             "NDRF: rasteriser + shader kernel time). PSNR against the reference, both "
+             "quantised to 16 bits (ceiling ~107 dB).", "",
+             "| device | type | method | frame | ms | FPS | PSNR vs reference | max abs diff |",
+             "|---|---|---|---|---|---|---|---|"]
+    for d in devices:
+        for r in d["rows"]:
+            if "error" in r:
+                lines.append(f"| {d['name']} | {d['type']} | {r['method']} | "
+                             f"{r.get('size', '')} | error: {r['error'][:120]} | | | |")
+                continue
+            ms = r["ms"]["median"]
+            lines.append(f"| {d['name']} | {d['type']} | {r['method']} | {r['size']} | "
+                         f"{ms:.1f} | {1000 / ms:.1f} | {r['psnr']:.1f} | "
+                         f"{r['max_abs_diff']:.1e} |")
+    return "\n".join(lines) + "\n"
+
+
+def run(folder: Path, out: Path, repeats: int) -> list[dict]:
+    with np.load(folder / "reference.npz", allow_pickle=False) as npz:
+        reference = {k: npz[k] for k in npz.files}
+    devices = []
+    for index, device in enumerate(list_devices()):
+        info = device_info(device)
+        name = f"{info['platform']} / {info['device']}"
+        print(f"[{index}] {name}", flush=True)
+        devices.append({"index": index, "name": name, "type": info["type"], "info": info,
+                        "rows": check_device(index, folder, reference, repeats)})
+    meta = {"reference": json.loads((folder / "reference.json").read_text()),
+            "repeats": repeats, "date": datetime.datetime.now().isoformat(timespec="seconds")}
+    text = markdown(devices, meta)
+    out.mkdir(parents=True, exist_ok=True)
+    write_atomic(out / "device_check.md", text)
+    write_atomic(out / "device_check.json", json.dumps({"meta": meta, "devices": devices},
+                                                       indent=2))
+    print(text)
+    return devices
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m bench.device_check", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--make-reference", type=Path, metavar="DIR",
+                   help="write the models and reference images (on this machine's device)")
+    g.add_argument("--reference", type=Path, metavar="DIR", help="check every device against DIR")
+    p.add_argument("--out", type=Path, default=Path("results"))
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--device", default=None, help="device for --make-reference")
+    args = p.parse_args(argv)
+    if args.make_reference:
+        make_reference(args.make_reference, args.device)
+    else:
+        run(args.reference, args.out, args.repeats)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,26 @@
+"""bench.device_check on this machine's devices against references made here (small sizes):
+every device renders both methods, and the chosen device reproduces its own references."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from bench import device_check
+
+
+def test_device_check_against_own_reference(tmp_path, monkeypatch):
+    monkeypatch.setattr(device_check, "SIZES", ((40, 30), (24, 24)))
+    device_check.make_reference(tmp_path / "ref")
+    devices = device_check.run(tmp_path / "ref", tmp_path / "out", repeats=1)
+    report = json.loads((tmp_path / "out" / "device_check.json").read_text())
+    assert len(report["devices"]) == len(devices) >= 1
+    ref_device = report["meta"]["reference"]["device"]
+    own = [d for d in devices if d["name"] == ref_device]
+    assert len(own) == 1, (ref_device, [d["name"] for d in devices])
+    rows = own[0]["rows"]
+    assert {(r["method"], r["size"]) for r in rows} == {
+        (m, s) for m in ("ngprt", "ndrf") for s in ("40x30", "24x24")}
+    for r in rows:
+        assert "error" not in r and r["max_abs_diff"] == pytest.approx(0.0, abs=1 / 65535), r
+    assert "| ndrf | 40x30 |" in (tmp_path / "out" / "device_check.md").read_text()
