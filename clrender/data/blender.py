@@ -80,8 +80,7 @@ def frame_views(meta: dict, frames: list, poses: np.ndarray, file: Path, indices
         img_file = locate(frames[i]["file_path"])
         width, height = image_size(img_file)
         m = {**meta, **frames[i]}
-        full = (width, height) if prescaled == 1 else \
-            declared_size(m, width, height, prescaled, img_file, file)
+        full = declared_size(m, width, height, prescaled, img_file, file)
         cameras.append(intrinsics(m, *full, poses[i], i, file).scaled_to(width, height))
         files.append(img_file)
     return files, cameras
@@ -89,11 +88,13 @@ def frame_views(meta: dict, frames: list, poses: np.ndarray, file: Path, indices
 
 def declared_size(meta: dict, width: int, height: int, factor: int, img_file: Path,
                   file: Path) -> tuple[int, int]:
-    """(w, h) of a frame whose ``width`` x ``height`` image was shrunk ``factor`` times."""
-    w, h = meta.get("w"), meta.get("h")
-    if w is None or h is None or abs(width - w / factor) >= 1 or abs(height - h / factor) >= 1:
-        raise ValueError(f"{img_file}: image is {width}x{height}, expected w x h = {w}x{h} "
-                         f"of {file.name} shrunk {factor} times")
+    """(w, h) the intrinsics of a frame describe, its ``width`` x ``height`` image shrunk
+    ``factor`` times from them; an image of another size is refused."""
+    w, h = meta.get("w", width * factor), meta.get("h", height * factor)
+    if abs(width - w / factor) >= 1 or abs(height - h / factor) >= 1:
+        shrunk = f" shrunk {factor} times" if factor > 1 else ""
+        raise ValueError(f"{img_file}: image is {width}x{height}, but w, h of {file.name} "
+                         f"say {w}x{h}{shrunk}")
     return int(w), int(h)
 
 
@@ -148,9 +149,6 @@ def pose(frame: dict, i: int, file: Path) -> np.ndarray:
 def intrinsics(meta: dict, width: int, height: int, c2w: np.ndarray, i: int,
                file: Path) -> Camera:
     """Camera of frame ``i`` from camera_angle_x/y or instant-ngp's fl_x, fl_y, cx, cy, w, h."""
-    if ("w" in meta and meta["w"] != width) or ("h" in meta and meta["h"] != height):
-        raise ValueError(f"{file}: frame {i} image is {width}x{height}, but w, h say "
-                         f"{meta.get('w', width)}x{meta.get('h', height)}")
     if "fl_x" in meta:
         fx = float(meta["fl_x"])
     elif "camera_angle_x" in meta:

@@ -14,6 +14,7 @@ Examples:
 """
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -88,12 +89,13 @@ def check_split(views: SplitViews) -> SplitViews:
     """``views`` if non-empty with one image size; errors name the source and the file."""
     if not views.files:
         raise ValueError(f"{views.source}: split {views.split!r} has no images")
-    first = views.cameras[0]
+    sizes = Counter((c.width, c.height) for c in views.cameras)
+    (w, h), n = sizes.most_common(1)[0]
     for file, cam in zip(views.files, views.cameras):
-        if (cam.width, cam.height) != (first.width, first.height):
-            raise ValueError(f"{file}: image is {cam.width}x{cam.height}, but "
-                             f"{views.files[0].name} of the same split is "
-                             f"{first.width}x{first.height} (one size per split)")
+        if (cam.width, cam.height) != (w, h):
+            raise ValueError(f"{file}: image is {cam.width}x{cam.height}, but {n} of the "
+                             f"{len(views.files)} images of split {views.split!r} are {w}x{h} "
+                             "(one size per split)")
     return views
 
 
