@@ -22,7 +22,8 @@ def check_dataset(path, downscale: int = 1) -> dict:
 
     Returns:
         ``{"format", "path", "scene", "splits": {split: {"views", "width", "height",
-        "source", "resize", "fx", "fy", "cx", "cy", "intrinsics_vary"}}, "camera_distance":
+        "source", "resize", "fx", "fy", "cx", "cy", "intrinsics_vary"} or None where a
+        Blender folder has no such split}, "camera_distance":
         {"min", "max"}}``; distances are from the scene centre (the origin of normalised
         space) to the camera centres of every split, in normalised units (bounded scenes
         fill [-1, 1]^3; unbounded ones have their cameras within 1).
@@ -30,8 +31,9 @@ def check_dataset(path, downscale: int = 1) -> dict:
     fmt = detect_format(path)
     splits, origins, scene = {}, [], None
     for split in SPLITS:
-        if fmt == "blender" and not (Path(path) / f"transforms_{split}.json").is_file() \
-                and split == "val":
+        if fmt == "blender" and split != "train" \
+                and not (Path(path) / f"transforms_{split}.json").is_file():
+            splits[split] = None  # a Blender folder may lack val (or test) views
             continue
         views = scan_dataset(path, split, downscale)
         cams = views.final_cameras()
@@ -51,6 +53,9 @@ def format_summary(summary: dict) -> str:
     """The human-readable lines ``clrender data check`` prints."""
     lines = [f"{summary['path']}: {summary['format']}, {summary['scene']}"]
     for split, s in summary["splits"].items():
+        if s is None:
+            lines.append(f"  {split:5s} none")
+            continue
         shrink = f", shrunk {s['resize']}x" if s["resize"] > 1 else ""
         vary = " (first view; they vary)" if s["intrinsics_vary"] else ""
         lines.append(f"  {split:5s} {s['views']:4d} views  {s['width']}x{s['height']}  "
