@@ -62,9 +62,12 @@ def _is_current(path: Path, kind: str) -> bool:
     return isinstance(meta, dict) and meta.get("clrender") == scene_key(kind, 0)
 
 
-def data_fingerprint(path: Path) -> str:
-    """sha256 over the relative names and bytes of every file of a dataset folder."""
+def data_fingerprint(path: Path, downscale: int = 1) -> str:
+    """sha256 over the relative names and bytes of every file of a dataset folder, and
+    the ``downscale`` it is read at (when not 1, so earlier fingerprints stay valid)."""
     h = hashlib.sha256()
+    if downscale != 1:
+        h.update(f"downscale={downscale}".encode())
     for f in sorted(p for p in Path(path).rglob("*") if p.is_file()):
         h.update(str(f.relative_to(path)).encode())
         h.update(f.read_bytes())
@@ -86,20 +89,22 @@ def _model_key(spec: dict) -> str:
 
 
 def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, method: str,
-                 options: dict, seed: int = 0, torch_device: str | None = None) -> ModelEntry:
+                 options: dict, seed: int = 0, torch_device: str | None = None,
+                 downscale: int = 1) -> ModelEntry:
     """Train (if missing) and bake (if missing) the model of one table row.
 
     Args:
         method: the row's method; ``options`` its model options. An option ``teacher``
             (a dict of NGP-RT model options) names a teacher that is ensured first (cached
             like any model) and handed to the method's training as a baked file.
+        fingerprint, downscale: :func:`data_fingerprint` of ``data`` read at ``downscale``.
     """
     plugin = methods.get(method)
     options = dict(options)
     teacher = None
     if "teacher" in options:
         teacher = ensure_model(root, data, fingerprint, preset, "ngprt", options.pop("teacher"),
-                               seed=seed, torch_device=torch_device)
+                               seed=seed, torch_device=torch_device, downscale=downscale)
     spec = {**plugin.model_spec(preset, **options), "data": fingerprint, "seed": seed}
     if teacher is not None:
         spec["teacher"] = teacher.key
@@ -110,7 +115,8 @@ def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, method: 
         folder.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter()
         plugin.train_for_bench(data, folder / "run", preset, seed=seed, torch_device=torch_device,
-                               teacher=None if teacher is None else teacher.baked, **options)
+                               teacher=None if teacher is None else teacher.baked,
+                               downscale=downscale, **options)
         minutes = (time.perf_counter() - start) / 60.0
         plugin.bake_run(folder / "run", baked)
         write_atomic(meta_path, json.dumps({"spec": spec, "train_minutes": minutes}, indent=2))

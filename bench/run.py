@@ -40,7 +40,7 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict) -> str:
     from bench.measure import measure_row
     from clrender.data import load_dataset
 
-    test_set = load_dataset(data, split="test")
+    test_set = load_dataset(data, split="test", downscale=args.downscale)
     seed_list = list(range(args.seed, args.seed + args.seeds))
     results = []
     with tqdm(total=len(table.rows) * len(seed_list), desc=table.key, unit="model") as bar:
@@ -49,7 +49,8 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict) -> str:
             for seed in seed_list:
                 entry = cache.ensure_model(args.cache, data, fingerprint,
                                            args.preset or table.preset, row.method, row.model,
-                                           seed=seed, torch_device=args.torch_device)
+                                           seed=seed, torch_device=args.torch_device,
+                                           downscale=args.downscale)
                 m = measure_row(entry.baked, test_set, row.render, device=args.device,
                                 repeats=args.repeats, timing_sizes=table.timing_sizes)
                 m.update(train_minutes=entry.train_minutes, model_key=entry.key)
@@ -85,6 +86,9 @@ def build_parser() -> argparse.ArgumentParser:
                         f"(default: {' and '.join(train_curve.PRESETS)})")
     p.add_argument("--scene", default=None,
                    help="builtin-bounded | builtin-unbounded | a dataset folder (default: the table's)")
+    p.add_argument("--downscale", type=int, default=1, metavar="N",
+                   help="of a --scene folder: read its images_N/, else shrink its images N "
+                        "times (tables only; default 1)")
     p.add_argument("--device", default=None, help="OpenCL device spec (see `clrender info`)")
     p.add_argument("--torch-device", default=None, help="torch device for training")
     p.add_argument("--out", type=Path, default=Path("results"))
@@ -112,6 +116,9 @@ def main(argv=None) -> int:
         if not curve and len(args.presets or ()) > 1:
             raise ValueError(f"a table takes one --preset, got {', '.join(args.presets)}")
         args.preset = None if curve else (args.presets or [None])[0]
+        if args.downscale < 1 or (curve and args.downscale != 1):
+            raise ValueError(f"--downscale {args.downscale}: expected a whole number >= 1, "
+                             f"for tables only (not {train_curve.KEY})")
         args.cache = args.cache or cache.cache_root()
         from clrender.device import get_runtime
 
@@ -122,8 +129,9 @@ def main(argv=None) -> int:
         for table in tables:
             scene = args.scene or table.scene
             data = cache.resolve_scene(scene, args.cache)
-            fingerprint = cache.data_fingerprint(data)
-            meta.update(preset=args.preset or table.preset, scene=scene)
+            fingerprint = cache.data_fingerprint(data, args.downscale)
+            meta.update(preset=args.preset or table.preset, scene=scene if args.downscale == 1
+                        else f"{scene} (downscale {args.downscale})")
             print(run_table(table, data, fingerprint, args, meta))
         report.write_index(args.out)
         print(f"results written to {args.out}/")

@@ -116,11 +116,26 @@ def _manifest(npz, where: str) -> dict:
     return manifest
 
 
-def peek_format(path) -> str:
-    """The ``format`` named by a baked file's manifest (reads the manifest only)."""
+def peek_manifest(path) -> dict:
+    """A baked file's manifest (reads the manifest only)."""
     where = str(path)
     with _open(path, where) as npz:
-        return _manifest(npz, where)["format"]
+        return _manifest(npz, where)
+
+
+def peek_format(path) -> str:
+    """The ``format`` named by a baked file's manifest (reads the manifest only)."""
+    return peek_manifest(path)["format"]
+
+
+def trained_downscale(path) -> int:
+    """The dataset downscale a baked file's model was trained at (``trained_on`` in its
+    manifest, written by the bake of a run), 1 when it says none."""
+    record = peek_manifest(path).get("trained_on")
+    value = record.get("downscale", 1) if isinstance(record, dict) else 1
+    if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+        fail(str(path), f"trained_on.downscale is {value!r}, expected an integer >= 1")
+    return value
 
 
 def read(path, format: str, version: int, keys=()) -> tuple[dict, dict]:

@@ -1,5 +1,5 @@
-"""The ``clrender`` command line: info | scene | train | bake | render | eval, plus each
-method's own commands (``clrender ndrf extract``)."""
+"""The ``clrender`` command line: info | scene | data | train | bake | render | eval, plus
+each method's own commands (``clrender ndrf extract``)."""
 from __future__ import annotations
 
 import argparse
@@ -43,6 +43,37 @@ def _cmd_scene(args) -> int:
     return 0
 
 
+def _cmd_data_check(args) -> int:
+    from .data.check import check_dataset, format_summary
+
+    print(format_summary(check_dataset(args.dir, downscale=args.downscale)))
+    return 0
+
+
+def _downscale(text: str) -> int:
+    """--downscale: a whole number >= 1."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return n
+
+
+def _add_downscale(parser, default, help_default: str) -> None:
+    parser.add_argument("--downscale", type=_downscale, default=default, metavar="N",
+                        help="read the dataset's images_N/ (LLFF, Mip-NeRF 360, COLMAP, "
+                             f"nerfstudio), else shrink its images N times ({help_default})")
+
+
+def _model_downscale(args) -> int:
+    """--downscale, else the one the model was trained at (its manifest), else 1."""
+    from .bakedfile import trained_downscale
+
+    return args.downscale if args.downscale is not None else trained_downscale(args.model)
+
+
 def _cmd_train(args) -> int:
     run = methods.get(args.method).train_from_args(args)
     print(f"trained {args.method} run in {run}")
@@ -62,8 +93,9 @@ def _render_options(args) -> dict:
 def _cmd_render(args) -> int:
     from .video import render_path
 
+    downscale = _model_downscale(args) if args.data else 1
     render_path(args.model, args.out, path=args.path, frames=args.frames, width=args.width,
-                height=args.height, data=args.data, device=args.device,
+                height=args.height, data=args.data, downscale=downscale, device=args.device,
                 background=args.background, fps=args.fps, **_render_options(args))
     return 0
 
@@ -72,7 +104,8 @@ def _cmd_eval(args) -> int:
     from .evaluate import evaluate
 
     result = evaluate(args.model, args.data, device=args.device, split=args.split,
-                      out_dir=args.save, **_render_options(args))
+                      out_dir=args.save, downscale=_model_downscale(args),
+                      **_render_options(args))
     print(json.dumps(result["mean"], indent=2))
     return 0
 
@@ -96,8 +129,18 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--size", type=int, default=200, help="image width and height in pixels")
     m.set_defaults(func=_cmd_scene)
 
+    s = sub.add_parser("data", help="dataset tools")
+    ss = s.add_subparsers(dest="data_command", required=True)
+    c = ss.add_parser("check", help="what the loader sees: format, splits, sizes, intrinsics, "
+                                    "bounded/unbounded, camera spread (reads image headers)")
+    c.add_argument("dir")
+    _add_downscale(c, 1, "default 1")
+    c.set_defaults(func=_cmd_data_check)
+
     s = sub.add_parser("train", help="train a model (PyTorch)")
-    s.add_argument("data", help="dataset folder (Blender transforms.json or LLFF poses_bounds.npy)")
+    s.add_argument("data", help="dataset folder: Blender transforms_*.json, nerfstudio "
+                                "transforms.json, LLFF poses_bounds.npy or COLMAP sparse/0")
+    _add_downscale(s, 1, "default 1; bake and eval reuse it")
     s.add_argument("--method", default=methods.DEFAULT, choices=methods.names())
     s.add_argument("--out", required=True, help="run folder (checkpoints, config, log)")
     s.add_argument("--preset", default="cpu", choices=methods.all_presets())
@@ -121,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--width", type=int, default=400)
     s.add_argument("--height", type=int, default=400)
     s.add_argument("--data", default=None, help="dataset whose cameras define spiral/test paths")
+    _add_downscale(s, None, "of --data; default: the model's training downscale")
     s.add_argument("--background", type=float, nargs=3, default=None,
                    help="RGB in [0, 1] (default: the method's, NGP-RT white)")
     s.add_argument("--fps", type=int, default=30)
@@ -132,6 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model")
     s.add_argument("data")
     s.add_argument("--split", default="test")
+    _add_downscale(s, None, "default: the model's training downscale")
     s.add_argument("--save", default=None, help="folder for the rendered test views")
     s.add_argument("--no-G", action="store_true", help="NGP-RT: march without the distance grid G")
     s.add_argument("--device", default=None)

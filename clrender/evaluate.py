@@ -16,7 +16,7 @@ from .renderer import Renderer
 from .video import to_uint8, write_png
 
 
-def evaluate(model, data, device=None, split: str = "test", out_dir=None,
+def evaluate(model, data, device=None, split: str = "test", out_dir=None, downscale: int = 1,
              **render_options) -> dict:
     """PSNR, SSIM and ms/frame of a baked model on every view of ``split``.
 
@@ -25,6 +25,7 @@ def evaluate(model, data, device=None, split: str = "test", out_dir=None,
         data: dataset folder (or a loaded Dataset).
         device: OpenCL device spec.
         out_dir: when given, the renderings are written there as ``{split}_{i:03d}.png``.
+        downscale: of a dataset folder (:func:`clrender.data.load_dataset`).
         **render_options: the method's render options (NGP-RT: ``use_G``).
     Returns:
         ``{"mean": {psnr, ssim, ms, ms_wall, ms_<stage>..., <stats>...}, "per_view": [...],
@@ -35,7 +36,7 @@ def evaluate(model, data, device=None, split: str = "test", out_dir=None,
     """
     from .data import load_dataset
 
-    ds = data if hasattr(data, "images") else load_dataset(data, split=split)
+    ds = data if hasattr(data, "images") else load_dataset(data, split=split, downscale=downscale)
     if not ds.cameras:
         raise ValueError(f"{getattr(ds, 'path', data)}: split {split!r} has no views")
     renderer = Renderer(model, device=device, **render_options)

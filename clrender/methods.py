@@ -15,7 +15,8 @@ benchmark harness) reaches a method only through here. A method's plug-in module
     add_train_arguments(parser), train_from_args(args) -> run folder
     bake_run(run_dir, out_path) -> path
     model_spec(preset, **options) -> dict, train_for_bench(data, out, preset, seed,
-        torch_device, teacher, **options) -> run folder   (the benchmark's model cache)
+        torch_device, teacher, downscale, **options) -> run folder   (the benchmark's
+        model cache)
 
 Examples:
     >>> from clrender import methods

@@ -62,8 +62,9 @@ def spiral_path(c2ws: np.ndarray, n_frames: int, n_rots: float = 2.0,
 
 
 def path_cameras(scene: str, path: str, frames: int, width: int, height: int,
-                 data=None) -> list[Camera]:
-    """The cameras of a render path (see the module doc) at ``width`` x ``height``."""
+                 data=None, downscale: int = 1) -> list[Camera]:
+    """The cameras of a render path (see the module doc) at ``width`` x ``height``; a
+    dataset folder ``data`` is scanned at ``downscale`` (image headers, no pixels)."""
     if path == "orbit":
         o = ORBIT[scene]
         return [Camera.from_fov(o["fov_x"], width, height, c2w)
@@ -72,11 +73,9 @@ def path_cameras(scene: str, path: str, frames: int, width: int, height: int,
         raise ValueError(f"unknown camera path {path!r}; expected one of {PATHS}")
     if data is None:
         raise ValueError(f"path={path!r} needs a dataset (data=...) for its cameras")
-    from .data import load_dataset
+    from .data import scan_dataset
 
-    ds = load_dataset(data, "train" if path == "spiral" else "test")
-    if not ds.cameras:
-        raise ValueError(f"{data}: the dataset has no cameras for path={path!r}")
+    ds = scan_dataset(data, "train" if path == "spiral" else "test", downscale)  # non-empty
     if path == "test":
         return [c.scaled_to(width, height) for c in ds.cameras[:frames]]
     base = ds.cameras[0].scaled_to(width, height)

@@ -34,7 +34,7 @@ def write_png(path: Path, frame: np.ndarray) -> None:
 
 def render_path(model, out, path: str = "orbit", frames: int = 60, width: int = 400,
                 height: int = 400, data=None, device=None, background=None, fps: int = 30,
-                **render_options) -> Path:
+                downscale: int = 1, **render_options) -> Path:
     """Render ``frames`` views of a baked model along ``path`` into ``out``.
 
     Args:
@@ -42,7 +42,8 @@ def render_path(model, out, path: str = "orbit", frames: int = 60, width: int = 
         out: a ``.mp4`` / ``.gif`` file, or a folder that receives ``frame_0000.png``, ...
         path: ``orbit``, ``spiral`` or ``test`` (:mod:`clrender.paths`).
         data: dataset (path or name for :func:`clrender.data.load_dataset`) whose
-            cameras define ``spiral`` and ``test``.
+            cameras define ``spiral`` and ``test``; ``downscale`` says which of its image
+            folders to find them by (:func:`clrender.data.scan_dataset`).
         device: OpenCL device spec.
         background: RGB in [0, 1] behind the model (None: the method's default).
         fps: frame rate of a video.
@@ -55,7 +56,8 @@ def render_path(model, out, path: str = "orbit", frames: int = 60, width: int = 
         raise ValueError(f"{out}: an .mp4 (H.264, yuv420p) needs an even width and height, "
                          f"got {width}x{height}")
     renderer = Renderer(model, device=device, **render_options)
-    cameras = path_cameras(renderer.model.config.scene, path, frames, width, height, data)
+    cameras = path_cameras(renderer.model.config.scene, path, frames, width, height, data,
+                           downscale)
     frames_iter = (to_uint8(renderer.render(c, background=background)["rgb"])
                    for c in tqdm(cameras, desc=f"render {path}", unit="frame"))
     if out.suffix.lower() in VIDEO_SUFFIXES:

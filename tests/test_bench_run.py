@@ -65,7 +65,8 @@ def test_seeds_must_be_a_positive_count(capsys):
 @pytest.fixture
 def fake_training(monkeypatch):
     """run.main without training or rendering: every (row, seed) gets a fake model whose
-    PSNR is 20 + seed; returns the (method, seed) of every ensure_model call."""
+    PSNR is 20 + seed; returns the (method, seed, downscale) of every ensure_model call
+    (and ("load", split, downscale) of every dataset load)."""
     from pathlib import Path
     from types import SimpleNamespace
 
@@ -75,8 +76,10 @@ def fake_training(monkeypatch):
 
     calls = []
 
-    def ensure_model(root, data, fingerprint, preset, method, options, seed=0, torch_device=None):
-        calls.append((method, seed))
+    def ensure_model(root, data, fingerprint, preset, method, options, seed=0, torch_device=None,
+                     downscale=1):
+        assert fingerprint == f"fp{downscale}"
+        calls.append((method, seed, downscale))
         return cache.ModelEntry(f"{method}-{seed}", Path(str(seed)), root, 1.0)
 
     def measure_row(baked, test_set, render, **kw):
@@ -90,10 +93,13 @@ def fake_training(monkeypatch):
     cam = SimpleNamespace(width=4, height=4)
     monkeypatch.setattr(cache, "ensure_model", ensure_model)
     monkeypatch.setattr(cache, "resolve_scene", lambda scene, root: root)
-    monkeypatch.setattr(cache, "data_fingerprint", lambda path: "fp")
+    monkeypatch.setattr(cache, "data_fingerprint", lambda path, downscale=1: f"fp{downscale}")
     monkeypatch.setattr(measure, "measure_row", measure_row)
-    monkeypatch.setattr(clrender.data, "load_dataset",
-                        lambda path, split: SimpleNamespace(cameras=[cam]))
+    def load_dataset(path, split, downscale=1):
+        calls.append(("load", split, downscale))
+        return SimpleNamespace(cameras=[cam])
+
+    monkeypatch.setattr(clrender.data, "load_dataset", load_dataset)
     monkeypatch.setattr(clrender.device, "get_runtime", lambda spec: SimpleNamespace(name="fake"))
     return calls
 
@@ -101,7 +107,8 @@ def fake_training(monkeypatch):
 def test_seeds_train_every_row_per_seed_and_the_index_lists_each_table(fake_training, tmp_path):
     common = ["--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
     assert run.main(["ndrf-teacher", "--seed", "5", "--seeds", "2"] + common) == 0
-    assert fake_training == [("ngprt", 5), ("ngprt", 6), ("ndrf", 5), ("ndrf", 6)]
+    assert fake_training == [("load", "test", 1), ("ngprt", 5, 1), ("ngprt", 6, 1),
+                             ("ndrf", 5, 1), ("ndrf", 6, 1)]
     rows = json.loads((tmp_path / "out" / "ndrf-teacher.json").read_text())["rows"]
     assert rows[0]["seeds"] == [5, 6] and rows[0]["PSNR"] == 25.5
     assert [p["model_key"] for p in rows[1]["per_seed"]] == ["ndrf-5", "ndrf-6"]
@@ -131,3 +138,20 @@ def test_builtin_scene_made_once_and_again_when_the_generator_changed(tmp_path, 
     (path / "transforms_train.json").write_text(json.dumps(meta))
     assert cache.resolve_scene("builtin-bounded", tmp_path) == path
     assert made == ["bounded", "bounded"] and not list(path.parent.glob(".tmp-scene-*"))
+
+
+def test_downscale_reaches_the_test_set_the_models_and_their_fingerprint(fake_training, tmp_path):
+    common = ["--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
+    assert run.main(["ndrf-teacher", "--downscale", "4"] + common) == 0
+    assert fake_training == [("load", "test", 4), ("ngprt", 0, 4), ("ndrf", 0, 4)]
+    assert "downscale 4" in (tmp_path / "out" / "ndrf-teacher.md").read_text()
+    assert run.main(["train-curve", "--downscale", "2"] + common) == 2
+
+
+def test_fingerprint_holds_the_downscale(tmp_path):
+    from bench import cache
+
+    (tmp_path / "a.txt").write_text("a")
+    plain = cache.data_fingerprint(tmp_path)
+    assert cache.data_fingerprint(tmp_path, 1) == plain
+    assert len({plain, cache.data_fingerprint(tmp_path, 2), cache.data_fingerprint(tmp_path, 4)}) == 3

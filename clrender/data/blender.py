@@ -11,11 +11,10 @@ import json
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from ..camera import Camera
-from .dataset import (F32, SCENE_KINDS, Dataset, area_downscale, check_downscale, composite,
-                      downscaled_camera, read_image, stack_images)
+from .dataset import SCENE_KINDS, Dataset, check_downscale
+from .views import SplitViews, check_pose, check_split, image_size, read_views
 
 NERF_SYNTHETIC_SCALE = 2.0 / 3.0
 
@@ -32,33 +31,71 @@ def load_blender(path, split: str = "train", downscale: int = 1,
     Returns:
         a :class:`Dataset` with images (N, H/downscale, W/downscale, 3) float32.
     """
+    return read_views(scan_blender(path, split, downscale), background)
+
+
+def scan_blender(path, split: str = "train", downscale: int = 1) -> SplitViews:
+    """The files and cameras of ``path/transforms_{split}.json`` (image headers only)."""
     root, factor = Path(path), check_downscale(downscale)
     file = root / f"transforms_{split}.json"
     meta = read_json(file)
     kind, scale = scene_info(meta, file)
     frames = meta.get("frames")
+    poses = frame_poses(frames, file)
+    poses[:, :3, 3] *= scale
+    files, cameras = frame_views(meta, frames, poses, file)
+    return check_split(SplitViews("blender", root, split, kind, files, cameras, factor, file))
+
+
+def frame_poses(frames, file: Path) -> np.ndarray:
+    """(N, 4, 4) float64 checked camera-to-world matrices of a transforms file's ``frames``."""
     if not isinstance(frames, list) or not frames:
         raise ValueError(f"{file}: missing or empty 'frames' list")
-    bg = np.asarray(background, dtype=F32).reshape(3)
-    images, alphas, cameras, files = [], [], [], []
-    for i, frame in enumerate(tqdm(frames, desc=f"loading {split}", disable=None, leave=False)):
+    poses = []
+    for i, frame in enumerate(frames):
         if not isinstance(frame, dict) or "file_path" not in frame:
             raise ValueError(f"{file}: frame {i} has no 'file_path'")
-        img_file = image_path(file.parent, frame["file_path"])
-        rgba = read_image(img_file)
-        c2w = pose(frame, i, file)
-        c2w[:3, 3] *= scale
-        camera = intrinsics({**meta, **frame}, rgba.shape[1], rgba.shape[0], c2w, i, file)
-        rgb, alpha = composite(rgba, bg)
-        images.append(area_downscale(rgb, factor))
-        alphas.append(None if alpha is None else area_downscale(alpha, factor))
-        cameras.append(downscaled_camera(camera, factor))
+        poses.append(check_pose(pose(frame, i, file), f"{file}: frame {i} "
+                                                      f"({frame['file_path']})"))
+    return np.stack(poses)
+
+
+def frame_views(meta: dict, frames: list, poses: np.ndarray, file: Path, indices=None,
+                locate=None, prescaled: int = 1) -> tuple[list[Path], list[Camera]]:
+    """(image files, cameras at their header sizes) of a transforms file's frames.
+
+    Args:
+        meta: the file's top-level object (global intrinsics; a frame's keys override them).
+        frames, poses: every frame and its (4, 4) camera-to-world (:func:`frame_poses`,
+            already normalised).
+        indices: the frames to take (default all).
+        locate: ``file_path -> Path`` of a frame's image; default :func:`image_path`
+            beside ``file``.
+        prescaled: the images were shrunk by this factor from the ``w`` x ``h`` the
+            intrinsics describe (an ``images_N/`` folder).
+    """
+    locate = locate or (lambda file_path: image_path(file.parent, file_path))
+    files, cameras = [], []
+    for i in range(len(frames)) if indices is None else indices:
+        img_file = locate(frames[i]["file_path"])
+        width, height = image_size(img_file)
+        m = {**meta, **frames[i]}
+        full = declared_size(m, width, height, prescaled, img_file, file)
+        cameras.append(intrinsics(m, *full, poses[i], i, file).scaled_to(width, height))
         files.append(img_file)
-    has_alpha = [a is not None for a in alphas]
-    if any(has_alpha) and not all(has_alpha):
-        raise ValueError(f"{file}: some images have an alpha channel and some do not")
-    alpha = stack_images(alphas, files) if all(has_alpha) else None
-    return Dataset(stack_images(images, files), cameras, kind, bg, str(root), split, alpha)
+    return files, cameras
+
+
+def declared_size(meta: dict, width: int, height: int, factor: int, img_file: Path,
+                  file: Path) -> tuple[int, int]:
+    """(w, h) the intrinsics of a frame describe, its ``width`` x ``height`` image shrunk
+    ``factor`` times from them; an image of another size is refused."""
+    w, h = meta.get("w", width * factor), meta.get("h", height * factor)
+    if abs(width - w / factor) >= 1 or abs(height - h / factor) >= 1:
+        shrunk = f" shrunk {factor} times" if factor > 1 else ""
+        raise ValueError(f"{img_file}: image is {width}x{height}, but w, h of {file.name} "
+                         f"say {w}x{h}{shrunk}")
+    return int(w), int(h)
 
 
 def read_json(file: Path) -> dict:
@@ -112,9 +149,6 @@ def pose(frame: dict, i: int, file: Path) -> np.ndarray:
 def intrinsics(meta: dict, width: int, height: int, c2w: np.ndarray, i: int,
                file: Path) -> Camera:
     """Camera of frame ``i`` from camera_angle_x/y or instant-ngp's fl_x, fl_y, cx, cy, w, h."""
-    if ("w" in meta and meta["w"] != width) or ("h" in meta and meta["h"] != height):
-        raise ValueError(f"{file}: frame {i} image is {width}x{height}, but w, h say "
-                         f"{meta.get('w', width)}x{meta.get('h', height)}")
     if "fl_x" in meta:
         fx = float(meta["fl_x"])
     elif "camera_angle_x" in meta:

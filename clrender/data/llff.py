@@ -14,11 +14,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from ..camera import Camera
-from .dataset import (F32, Dataset, area_downscale, check_downscale, composite,
-                      downscaled_camera, read_image, stack_images)
+from .dataset import Dataset, check_downscale
+from .views import SplitViews, check_pose, check_split, image_size, read_views
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 TEST_EVERY = 8
@@ -40,31 +39,38 @@ def load_llff(path, split: str = "train", downscale: int = 1,
     Returns:
         a :class:`Dataset` with scene "unbounded" and cameras in normalised space.
     """
+    return read_views(scan_llff(path, split, downscale), background)
+
+
+def scan_llff(path, split: str = "train", downscale: int = 1) -> SplitViews:
+    """The files and cameras of one split of an LLFF folder (image headers only)."""
     root, factor = Path(path), check_downscale(downscale)
     file = root / "poses_bounds.npy"
     poses = read_poses(file)
     folder, resize = image_folder(root, factor)
-    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    files = image_files(folder)
     if len(files) != len(poses):
         raise ValueError(f"{folder}: found {len(files)} images, but {file} has "
                          f"{len(poses)} poses")
-    c2w = normalise(llff_to_nerf(poses))
-    bg = np.asarray(background, dtype=F32).reshape(3)
-    images, alphas, cameras = [], [], []
+    c2w = llff_to_nerf(poses)
+    for i in range(len(poses)):
+        check_pose(c2w[i], f"{file}: pose {i} ({files[i].name})")
+    c2w = normalise(c2w)
     chosen = split_indices(len(poses), split)
-    for i in tqdm(chosen, desc=f"loading {split}", disable=None, leave=False):
-        rgba = read_image(files[i])
-        rgb, alpha = composite(rgba, bg)
-        h, w = rgba.shape[:2]
+    cameras = []
+    for i in chosen:
+        w, h = image_size(files[i])
         H, W, f = poses[i, :, 4]  # hwf of the original images: scale to this file's size
-        camera = Camera(f * w / W, f * h / H, w / 2.0, h / 2.0, w, h, c2w[i])
-        images.append(area_downscale(rgb, resize))
-        alphas.append(None if alpha is None else area_downscale(alpha, resize))
-        cameras.append(downscaled_camera(camera, resize))
-    chosen_files = [files[i] for i in chosen]
-    alpha = stack_images(alphas, chosen_files) if all(a is not None for a in alphas) else None
-    return Dataset(stack_images(images, chosen_files), cameras, "unbounded", bg, str(root),
-                   split, alpha)
+        cameras.append(Camera(f * w / W, f * h / H, w / 2.0, h / 2.0, w, h, c2w[i]))
+    return check_split(SplitViews("llff", root, split, "unbounded", [files[i] for i in chosen],
+                                  cameras, resize, folder))
+
+
+def image_files(folder: Path) -> list[Path]:
+    """The images of ``folder`` by name (``.png``, ``.jpg``, ``.jpeg``, any case; other
+    files, e.g. ``.DS_Store`` or notes, are not images and are left out)."""
+    return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES
+                  and not p.name.startswith("."))
 
 
 def read_poses(file: Path) -> np.ndarray:

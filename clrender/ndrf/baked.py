@@ -114,10 +114,12 @@ def validate(model: NDRFModel, where: str = "model") -> None:
         fail(where, f"background {bg.tolist()} must lie in [0, 1]")
 
 
-def save_baked(model: NDRFModel, path) -> Path:
+def save_baked(model: NDRFModel, path, trained_on: dict | None = None) -> Path:
     """Validate ``model`` and write it to ``path`` atomically. Returns the path."""
     validate(model, str(path))
     manifest = {"format": FORMAT, "version": VERSION, "config": model.config.to_dict()}
+    if trained_on is not None:  # {"data": path, "downscale": N}, for evaluation to reuse
+        manifest["trained_on"] = trained_on
     return bakedfile.save(path, manifest, model.arrays)
 
 

@@ -32,7 +32,8 @@ def train_from_args(args):
     if not args.teacher:
         raise ValueError("--method ndrf needs --teacher TEACHER.npz (a baked NGP-RT model)")
     return train(args.data, args.out, teacher=args.teacher, preset=args.preset,
-                 iterations=args.iterations, seed=args.seed, device=args.torch_device)
+                 iterations=args.iterations, seed=args.seed, device=args.torch_device,
+                 downscale=args.downscale)
 
 
 def bake_run(run_dir, out_path):
@@ -58,13 +59,13 @@ def model_spec(preset: str, **options) -> dict:
 
 
 def train_for_bench(data, out, preset: str, seed: int = 0, torch_device=None, teacher=None,
-                    **options):
+                    downscale: int = 1, **options):
     from .train import train
 
     if teacher is None:
         raise ValueError("an NDRF row needs model option `teacher` (NGP-RT model options)")
     return train(str(data), str(out), teacher=teacher, preset=preset, seed=seed,
-                 device=torch_device, **options)
+                 device=torch_device, downscale=downscale, **options)
 
 
 def _cmd_extract(args) -> int:

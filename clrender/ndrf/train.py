@@ -170,18 +170,35 @@ def _meshes(out: Path, reuse: bool, teacher, cfg, ecfg, cameras, progress):
     return meshes
 
 
-def _config_json(ds, data, cfg, tcfg, ecfg, teacher_id, preset, seed) -> dict:
+def _config_json(ds, data, cfg, tcfg, ecfg, teacher_id, preset, seed, downscale) -> dict:
     conf = {"method": "ndrf", "model": cfg.to_dict(), "train": asdict(tcfg),
             "extract": asdict(ecfg),
             "data": None if hasattr(data, "images") else str(Path(data).resolve()),
+            "downscale": downscale,
             "teacher": teacher_id, "preset": preset, "seed": int(seed),
             "background": [float(v) for v in np.asarray(ds.background).reshape(3)]}
     return json.loads(json.dumps(conf))
 
 
+def _bounded_train_set(data, downscale: int):
+    """The training split of ``data`` (folder or loaded Dataset), refused before its pixels
+    are read when the scene is unbounded: NDRF's meshes come from a bounded grid."""
+    from ..data import read_views, scan_dataset
+
+    if hasattr(data, "images"):
+        scene, where, views = data.scene, data.path, None
+    else:
+        views = scan_dataset(data, "train", downscale)
+        scene, where = views.scene, f"{views.root} ({views.format})"
+    if scene != "bounded":
+        raise ValueError(f"{where}: an {scene} scene; NDRF is bounded-only (its duplex meshes "
+                         "are extracted inside [-1, 1]^3): train NGP-RT on it instead")
+    return data if views is None else read_views(views)
+
+
 def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None,
           seed: int = 0, device=None, progress: bool = True,
-          train_config: TrainConfig | None = None, **options) -> Path:
+          train_config: TrainConfig | None = None, downscale: int = 1, **options) -> Path:
     """Train an NDRF model on the dataset ``data`` (folder or loaded train Dataset) from the
     baked NGP-RT ``teacher`` (path or loaded model) into the run folder ``out``.
 
@@ -190,21 +207,19 @@ def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None
         iterations: overrides the preset's count.
         train_config: replaces the preset's :class:`TrainConfig`.
         device: torch device; default cuda when present.
+        downscale: the dataset's ``images_{downscale}/`` or its images shrunk that many
+            times; recorded in ``config.json``.
         **options: :data:`MODEL_OPTIONS` (thresholds, kernel_size, distill).
     An existing run with the same config.json is resumed (meshes, distillation views and
     checkpoint reused). Returns the run folder.
     """
     dev, out = pick_device(device), Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(seed)
-    if hasattr(data, "images"):
-        ds = data
-    else:
-        from ..data import load_dataset
-        ds = load_dataset(data, split="train")
+    ds = _bounded_train_set(data, downscale)
+    out.mkdir(parents=True, exist_ok=True)  # after loading: a bad dataset writes nothing
     cfg, tcfg, ecfg = configs(preset, iterations, train_config, **options)
     teacher_model, teacher_id = _teacher_info(teacher)
-    conf = _config_json(ds, data, cfg, tcfg, ecfg, teacher_id, preset, seed)
+    conf = _config_json(ds, data, cfg, tcfg, ecfg, teacher_id, preset, seed, downscale)
     conf_path, ckpt = out / "config.json", out / "checkpoint.pt"
     resume = conf_path.is_file() and json.loads(conf_path.read_text()) == conf
     if not resume:
@@ -307,4 +322,5 @@ def bake_run(run_dir, out_path) -> Path:
     model = NDRFModel(shader.config, shader.to_arrays(conf["background"]))
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    return save_baked(model, out_path)
+    trained_on = {"data": conf.get("data"), "downscale": conf.get("downscale", 1)}
+    return save_baked(model, out_path, trained_on=trained_on)

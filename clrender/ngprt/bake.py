@@ -117,6 +117,11 @@ def bake_state(model: NGPRT, occupancy: torch.Tensor, gamma: float, dataset,
     return bake(model, occupancy_0, gamma)
 
 
+def trained_on(conf: dict) -> dict:
+    """The manifest's record of a run's data (``config.json``): path and downscale."""
+    return {"data": conf.get("data"), "downscale": conf.get("downscale", 1)}
+
+
 def bake_run(run_dir, out_path, dataset=None, device=None, n_rays: int = CULL_RAYS) -> Path:
     """Bake the checkpoint of ``run_dir`` into ``out_path`` (written atomically).
 
@@ -133,9 +138,9 @@ def bake_run(run_dir, out_path, dataset=None, device=None, n_rays: int = CULL_RA
         if not conf.get("data"):
             raise ValueError(f"{run_dir}/config.json: no data path; pass the dataset")
         from ..data import load_dataset
-        dataset = load_dataset(conf["data"], split="train")
+        dataset = load_dataset(conf["data"], split="train", downscale=conf.get("downscale", 1))
     baked = bake_state(model, occ, gamma, dataset, n_rays=n_rays)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    save_baked(baked, out_path)
+    save_baked(baked, out_path, trained_on=trained_on(conf))
     return out_path

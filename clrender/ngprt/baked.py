@@ -268,8 +268,11 @@ def validate(model: BakedModel, where: str = "model") -> None:
 
 # ---- files ------------------------------------------------------------------------
 
-def save_baked(model: BakedModel, path) -> Path:
+def save_baked(model: BakedModel, path, trained_on: dict | None = None) -> Path:
     """Validate ``model`` and write it to ``path`` atomically (temp file + rename).
+
+    ``trained_on`` (``{"data": path, "downscale": N}``) goes into the manifest as is, for
+    evaluation to reuse (:func:`clrender.bakedfile.trained_downscale`).
 
     Returns:
         the path written.
@@ -277,6 +280,8 @@ def save_baked(model: BakedModel, path) -> Path:
     validate(model, str(path))
     manifest = {"format": FORMAT, "version": VERSION, "config": model.config.to_dict(),
                 "gamma": float(model.gamma)}
+    if trained_on is not None:
+        manifest["trained_on"] = trained_on
     return bakedfile.save(path, manifest, model.arrays)
 
 

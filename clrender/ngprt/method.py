@@ -27,7 +27,8 @@ def train_from_args(args):
     from .train import train
 
     return train(args.data, args.out, preset=args.preset, variant=args.variant, L=args.levels,
-                 iterations=args.iterations, seed=args.seed, device=args.torch_device)
+                 iterations=args.iterations, seed=args.seed, device=args.torch_device,
+                 downscale=args.downscale)
 
 
 def bake_run(run_dir, out_path):
@@ -60,9 +61,9 @@ def model_spec(preset: str, variant: str = "separate-v", L: int = 2) -> dict:
 
 
 def train_for_bench(data, out, preset: str, seed: int = 0, torch_device=None, teacher=None,
-                    variant: str = "separate-v", L: int = 2):
+                    variant: str = "separate-v", L: int = 2, downscale: int = 1):
     """Train one benchmark row's model into the run folder ``out``."""
     from .train import train
 
     return train(str(data), str(out), preset=preset, variant=variant, L=L, seed=seed,
-                 device=torch_device)
+                 device=torch_device, downscale=downscale)

@@ -243,13 +243,15 @@ def load_run(run_dir, device=None):
 def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 2,
           iterations: int | None = None, seed: int = 0, device=None,
           train_config: TrainConfig | None = None, progress: bool = True,
-          on_step=None) -> Path:
+          on_step=None, downscale: int = 1) -> Path:
     """Train an NGP-RT model on the dataset folder ``data`` (or a loaded Dataset) into the
     run folder ``out``.
 
     An existing checkpoint in ``out`` with the same config is resumed.
 
     Args:
+        downscale: the dataset's ``images_{downscale}/`` or its images shrunk that many
+            times (:func:`clrender.data.load_dataset`); recorded in ``config.json``.
         on_step: called as ``on_step(step, model, occ, gamma)`` after every iteration
             ``step`` (0-based, as ``log.jsonl``: its optimiser step and gamma update
             done, its log line and checkpoint written where due), with the :class:`NGPRT`
@@ -260,18 +262,19 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
         the run folder.
     """
     dev, out = pick_device(device), Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(seed)
     in_memory = hasattr(data, "images")
     if not in_memory:
         from ..data import load_dataset
-    ds = data if in_memory else load_dataset(data, split="train")
+    ds = data if in_memory else load_dataset(data, split="train", downscale=downscale)
+    out.mkdir(parents=True, exist_ok=True)  # after loading: a bad dataset writes nothing
     cfg = model_preset(preset, variant=variant, L=L, scene=ds.scene)
     tcfg = train_config or TRAIN_PRESETS[preset]
     if iterations is not None:
         tcfg = replace(tcfg, iterations=int(iterations))
     conf = {"model": cfg.to_dict(), "train": asdict(tcfg),
-            "data": None if in_memory else str(Path(data).resolve()), "preset": preset,
+            "data": None if in_memory else str(Path(data).resolve()), "downscale": downscale,
+            "preset": preset,
             "seed": seed, "background": [float(v) for v in ds.background]}
     conf = json.loads(json.dumps(conf))
     model = NGPRT(cfg).to(dev)
