@@ -14,8 +14,6 @@ Examples:
 """
 from __future__ import annotations
 
-import base64
-import json
 import shutil
 import time
 
@@ -41,12 +39,8 @@ def missing() -> str | None:
     return None
 
 
-def chromium(width: int, height: int, network_log: bool = False):
-    """A headless chromium (selenium WebDriver) with a ``width`` x ``height`` viewport.
-
-    Args:
-        network_log: record the browser's network events (:func:`websocket_frames`).
-    """
+def chromium(width: int, height: int):
+    """A headless chromium (selenium WebDriver) with a ``width`` x ``height`` viewport."""
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
@@ -54,8 +48,6 @@ def chromium(width: int, height: int, network_log: bool = False):
     options.binary_location = _browser()
     for flag in FLAGS:
         options.add_argument(flag)
-    if network_log:
-        options.set_capability("goog:loggingPrefs", {"performance": "ALL"})
     driver = webdriver.Chrome(service=Service(shutil.which("chromedriver")), options=options)
     driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride", {
         "width": int(width), "height": int(height), "deviceScaleFactor": 1, "mobile": False})
@@ -71,19 +63,23 @@ def webgl_renderer(driver) -> str | None:
         "return info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : 'webgl2';")
 
 
-def websocket_frames(driver) -> list[tuple[float, int]]:
-    """(browser timestamp s, payload bytes) of each WebSocket frame the page received since
-    the last call (needs ``network_log=True``)."""
-    frames = []
-    for entry in driver.get_log("performance"):
-        message = json.loads(entry["message"])["message"]
-        if message.get("method") == "Network.webSocketFrameReceived":
-            params = message["params"]
-            response = params["response"]
-            payload = response["payloadData"]
-            size = len(base64.b64decode(payload)) if response["opcode"] == 2 else len(payload)
-            frames.append((float(params["timestamp"]), size))
-    return frames
+def record_jpeg_images(driver) -> None:
+    """From the next page load on, note when the page receives each JPEG image (viser hands
+    a frame to three.js as a ``Blob`` of type image/jpeg through ``URL.createObjectURL``;
+    the WebSocket lives in a worker, out of reach of the page's network log)."""
+    driver.execute_cdp_cmd("Page.addScriptToEvaluateOnNewDocument", {"source": """
+        window.__jpegTimes = [];
+        const create = URL.createObjectURL;
+        URL.createObjectURL = function (obj) {
+            if (obj instanceof Blob && obj.type === "image/jpeg")
+                window.__jpegTimes.push(performance.now());
+            return create.call(URL, obj);
+        };"""})
+
+
+def jpeg_image_times(driver) -> list[float]:
+    """Page times (seconds) of the JPEG images received so far (:func:`record_jpeg_images`)."""
+    return [t / 1e3 for t in driver.execute_script("return window.__jpegTimes || [];")]
 
 
 def wait_for(predicate, timeout_s: float, what: str, poll_s: float = 0.05):

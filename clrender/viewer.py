@@ -215,6 +215,11 @@ class Viewer:
         return f"http://{self.server.get_host()}:{self.server.get_port()}"
 
     @property
+    def stats(self) -> str:
+        """The GUI's text: frame time, size and stage times of the last frame (markdown)."""
+        return self._stats.content
+
+    @property
     def max_size(self) -> int:
         return int(self._max_size.value)
 
