@@ -152,9 +152,10 @@ class _ClientLoop(threading.Thread):
         self.wake.set()
 
     def refresh(self) -> None:
-        """Render again at the current camera (options or sizes changed)."""
+        """Render again at the current camera (options or sizes changed), once the browser
+        has sent one."""
         with self._lock:
-            self.version += 1
+            self.version += 1 if self.version else 0
         self.wake.set()
 
     def run(self) -> None:
@@ -167,7 +168,10 @@ class _ClientLoop(threading.Thread):
             scale = 1.0 if resting else self.viewer.preview_scale
             if version == self.shown[0] and scale <= self.shown[1]:
                 continue
-            self.viewer.draw(self.client, scale)
+            try:
+                self.viewer.draw(self.client, scale)
+            except Exception as exc:  # noqa: BLE001 - shown in the panel; the loop serves on
+                self.viewer.show_error(f"frame failed: {exc!r}")
             self.shown = (version, scale)
 
 
@@ -258,11 +262,15 @@ class Viewer:
         try:
             renderer = Renderer(self.model, device=self.device, **options)
         except (ValueError, RuntimeError) as exc:
-            self._stats.content = f"**options {options} refused**: {exc}"
+            self.show_error(f"options {options} refused: {exc}")
             return
         with self._render_lock:
             self.renderer = renderer
         self._refresh_all()
+
+    def show_error(self, message: str) -> None:
+        """Show ``message`` in the GUI panel in place of the frame statistics."""
+        self._stats.content = f"**{message}**"
 
     def _refresh_all(self) -> None:
         for loop in list(self._loops.values()):
@@ -313,10 +321,13 @@ class Viewer:
         self._stats.content = _stats_markdown(out, frame_ms, camera.width, camera.height)
 
     def stop(self) -> None:
-        for client_id in list(self._loops):
-            loop = self._loops.pop(client_id)
+        """Stop the client loops (each finishes its frame) and the server."""
+        loops = [self._loops.pop(client_id) for client_id in list(self._loops)]
+        for loop in loops:
             loop.stopped.set()
             loop.wake.set()
+        for loop in loops:
+            loop.join(10.0)
         self.server.stop()
 
 

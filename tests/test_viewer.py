@@ -30,7 +30,7 @@ def need(reason_missing: str | None):
         return
     if UNDER_CI:
         pytest.fail(f"CI=true: {reason_missing}")
-    pytest.skip(reason_missing)
+    pytest.skip(reason_missing, allow_module_level=True)
 
 
 def need_module(name: str):
@@ -149,6 +149,34 @@ def test_client_loop_previews_while_moving_then_draws_full_size():
     assert 0.25 in scales and scales[-1] == 1.0, scales
     assert draws[-1][0] - moves[-1] >= 0.3, "full size drawn before the camera rested"
     assert scales.count(1.0) == 1, f"the resting view drawn more than once: {scales}"
+
+
+def test_client_loop_shows_a_failed_frame_and_serves_on():
+    calls, errors = [], []
+
+    def draw(client, scale):
+        calls.append(scale)
+        if len(calls) == 1:
+            raise RuntimeError("device lost")
+
+    fake = SimpleNamespace(rest_s=0.05, preview_scale=0.5, draw=draw, show_error=errors.append)
+    callbacks = []
+    client = SimpleNamespace(client_id=1, camera=SimpleNamespace(on_update=callbacks.append))
+    loop = viewer._ClientLoop(fake, client)
+    loop.refresh()                                   # no camera yet: nothing to draw
+    loop.start()
+    try:
+        time.sleep(0.3)
+        assert calls == []
+        callbacks[0](client.camera)
+        deadline = time.monotonic() + 10
+        while len(calls) < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
+    finally:
+        loop.stopped.set()
+        loop.wake.set()
+        loop.join(5)
+    assert errors == ["frame failed: RuntimeError('device lost')"] and len(calls) >= 2
 
 
 def test_option_control_rebuilds_the_renderer(model):
