@@ -191,15 +191,33 @@ def test_option_control_rebuilds_the_renderer(model):
         v.stop()
 
 
-def test_ndrf_model_has_no_option_controls():
+def test_ndrf_model_gets_its_declared_option_controls():
+    from clrender import methods
     from clrender.ndrf.config import NDRFConfig
     from clrender.ndrf.random_model import random_ndrf_model
 
-    v = viewer.Viewer(random_ndrf_model(NDRFConfig(thresholds=(1e-4, 1e-2)), seed=0), port=0)
+    model = random_ndrf_model(NDRFConfig(thresholds=(1e-4, 1e-2)), seed=0)
+    v = viewer.Viewer(model, port=0)
     try:
-        assert v._options == [] and v.renderer.method.FORMAT == "clrender-ndrf"
+        declared = [s.name for s in viewer.option_specs(methods.of_model(model).Renderer)]
+        assert [name for name, _, _ in v._options] == declared
+        assert v.renderer.method is methods.get("ndrf")
     finally:
         v.stop()
+
+
+def test_choice_controls_map_labels_back_to_values():
+    made = {}
+
+    class FakeGui:
+        def add_dropdown(self, label, options, initial_value, hint):
+            made[label] = (options, initial_value, hint)
+            return label
+
+    spec = viewer.OptionSpec("levels", int, 2, (1, 2, 4), "how many")
+    handle, convert = viewer._add_control(FakeGui(), spec)
+    assert made["levels"] == (("1", "2", "4"), "2", "how many")
+    assert convert("4") == 4 and isinstance(convert("4"), int)
 
 
 def test_training_cameras_drawn_as_frustums(model, tmp_path):
