@@ -281,7 +281,7 @@ class Viewer:
 
         ds = load_dataset(data, "train")
         centres = np.stack([c.origin for c in ds.cameras])
-        scale = 0.05 * float(np.median(np.linalg.norm(centres - centres.mean(0), axis=1)) or 1.0)
+        scale = 0.03 * float(np.median(np.linalg.norm(centres - centres.mean(0), axis=1)) or 1.0)
         step = max(1, max(ds.images.shape[1:3]) // 64)
         for i, (camera, image) in enumerate(zip(ds.cameras, ds.images)):
             wxyz, position, fov_y = camera_to_viser(camera)
