@@ -110,6 +110,14 @@ def _cmd_eval(args) -> int:
     return 0
 
 
+def _cmd_view(args) -> int:
+    from .viewer import serve
+
+    serve(args.model, data=args.data, host=args.host, port=args.port, device=args.device,
+          max_size=args.max_size)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="clrender", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -181,6 +189,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-G", action="store_true", help="NGP-RT: march without the distance grid G")
     s.add_argument("--device", default=None)
     s.set_defaults(func=_cmd_eval)
+
+    s = sub.add_parser("view", help="live browser viewer of a baked model (viser)")
+    s.add_argument("model")
+    s.add_argument("--data", default=None, help="dataset whose training cameras are drawn")
+    s.add_argument("--host", default="127.0.0.1", help="address to listen on (default local only)")
+    s.add_argument("--port", type=int, default=8080, help="port (the next free one if taken)")
+    s.add_argument("--max-size", type=int, default=800, help="long side of a resting frame, px")
+    s.add_argument("--device", default=None)
+    s.set_defaults(func=_cmd_view)
 
     for name in methods.names():
         plugin = methods.get(name)

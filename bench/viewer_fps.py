@@ -1,0 +1,106 @@
+"""Frames a second the viewer delivers to a page (render + JPEG encode + send) while the
+camera moves, measured with a real headless chromium (:mod:`bench.browser`).
+
+The viewer draws every frame at full size (``preview_scale`` 1), ``--size`` x ``--size``
+pixels in a page of that size (``?fixedDpr=1``: viser's adaptive pixel ratio off); a drag
+on the page's canvas keeps the camera moving for ``--seconds``. Counted: the JPEG frames
+the page received (:func:`bench.browser.jpeg_image_times`), between the first and the last,
+beside the frames the server sent and the renderer alone (same model, camera and size, no
+browser). The browser (WebGL on SwiftShader) shares the CPU with
+the renderer, as it does when someone views a model on this machine.
+
+Examples:
+    python -m bench.viewer_fps model.npz                     # 400x400, 10 s of dragging
+    python -m bench.viewer_fps ndrf.npz --size 400 --seconds 5
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+
+from clrender import methods
+from clrender.renderer import Renderer
+from clrender.viewer import Viewer
+
+from . import browser
+
+def renderer_fps(model, camera, seconds: float) -> tuple[float, float]:
+    """(frames a second of the renderer alone, median kernel ms) at ``camera``."""
+    renderer = Renderer(model)
+    renderer.render(camera)                          # build and first-launch costs
+    kernel_ms, start = [], time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        kernel_ms.append(renderer.render(camera)["ms"])
+    return len(kernel_ms) / (time.perf_counter() - start), float(np.median(kernel_ms))
+
+
+def _drag(driver, seconds: float) -> None:
+    """Drag across the page's canvas, back and forth, for about ``seconds``."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    canvas = driver.find_element(By.TAG_NAME, "canvas")
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        chain = ActionChains(driver).move_to_element(canvas).move_by_offset(-80, 0)
+        chain = chain.click_and_hold()
+        for step in (8,) * 20 + (-8,) * 20:
+            chain = chain.move_by_offset(step, 0).pause(0.01)
+        chain.release().perform()
+
+
+def measure(model, size: int, seconds: float) -> dict:
+    """Page-delivered, server-sent and renderer-only frame rates at ``size`` pixels."""
+    viewer = Viewer(model, port=0, max_size=size, preview_scale=1.0)
+    driver = browser.chromium(size, size)
+    browser.record_jpeg_images(driver)
+    try:
+        driver.get(viewer.url + "?fixedDpr=1")
+        browser.wait_for(lambda: viewer.frames_sent >= 1, 120, "first frame")
+        time.sleep(1.0)
+        before = len(browser.jpeg_image_times(driver))
+        sent, start = viewer.frames_sent, time.perf_counter()
+        _drag(driver, seconds)
+        wall = time.perf_counter() - start
+        sent = viewer.frames_sent - sent
+        camera = viewer.last_frame[0]
+        stats = viewer.stats
+        time.sleep(1.0)                              # frames still on their way
+        images = browser.jpeg_image_times(driver)[before:]
+    finally:
+        driver.quit()
+        viewer.stop()
+    page_fps = (len(images) - 1) / (images[-1] - images[0]) if len(images) > 1 else 0.0
+    alone_fps, kernel_ms = renderer_fps(model, camera, min(seconds, 5.0))
+    return {"size": f"{camera.width}x{camera.height}", "page_fps": page_fps,
+            "page_frames": len(images), "sent_fps": sent / wall, "sent_frames": sent,
+            "renderer_fps": alone_fps, "kernel_ms": kernel_ms, "last_stats": stats}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m bench.viewer_fps", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("model", help="a baked model (.npz), any method")
+    p.add_argument("--size", type=int, default=400, help="frame width and height, pixels")
+    p.add_argument("--seconds", type=float, default=10.0, help="how long the camera moves")
+    args = p.parse_args(argv)
+    reason = browser.missing()
+    if reason:
+        print(f"bench.viewer_fps: {reason}", file=sys.stderr)
+        return 2
+    model = methods.load(args.model)
+    r = measure(model, args.size, args.seconds)
+    print(f"{args.model} ({model.method}), {r['size']} frames:")
+    print(f"  delivered to the page  {r['page_fps']:6.1f} fps ({r['page_frames']} frames)")
+    print(f"  sent by the server     {r['sent_fps']:6.1f} fps ({r['sent_frames']} frames)")
+    print(f"  renderer alone         {r['renderer_fps']:6.1f} fps "
+          f"(kernel {r['kernel_ms']:.1f} ms median)")
+    print(f"  last GUI stats: {r['last_stats']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
