@@ -13,6 +13,7 @@ import time
 
 import numpy as np
 
+from ..methods import Option, Stat
 from .hits import HitCaster
 from .shader_cl import Shader
 
@@ -23,14 +24,17 @@ class Renderer:
     Args:
         model: a :class:`clrender.ndrf.baked.NDRFModel`, validated by its loader.
         device: OpenCL device spec or :class:`clrender.device.Runtime`.
+        hits: where the first hits come from (:data:`RENDER_OPTIONS`).
     """
 
-    SCALAR_STATS = {"Coverage": "coverage"}
-    RENDER_OPTIONS: dict = {}
+    SCALAR_STATS = {"Coverage": Stat("coverage", "{:.3f}", "share of pixels a mesh covers")}
+    RENDER_OPTIONS = {"hits": Option(str, "embree", "first hits on the meshes: Embree ray "
+                                     "casting", choices=("embree",))}
     TIME_NOTE = ("time per frame: ray casting into the meshes (Embree, on the CPU) + the "
                  "OpenCL gather and two conv passes (kernel times)")
 
-    def __init__(self, model, device=None):
+    def __init__(self, model, device=None, hits: str = "embree"):
+        self.RENDER_OPTIONS["hits"].check("hits", hits)
         self.model, self.config = model, model.config
         self.caster = HitCaster(model)
         self.shader = Shader(model, device=device)
