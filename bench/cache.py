@@ -91,15 +91,18 @@ def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, method: 
 
     Args:
         method: the row's method; ``options`` its model options. An option ``teacher``
-            (a dict of NGP-RT model options) names a teacher that is ensured first (cached
-            like any model) and handed to the method's training as a baked file.
+            (a dict of model options of the method's ``TEACHER`` method) names a teacher
+            that is ensured first (cached like any model) and handed to the method's
+            training as a baked file.
     """
     plugin = methods.get(method)
     options = dict(options)
     teacher = None
     if "teacher" in options:
-        teacher = ensure_model(root, data, fingerprint, preset, "ngprt", options.pop("teacher"),
-                               seed=seed, torch_device=torch_device)
+        if plugin.TEACHER is None:
+            raise ValueError(f"method {method!r} takes no teacher")
+        teacher = ensure_model(root, data, fingerprint, preset, plugin.TEACHER,
+                               options.pop("teacher"), seed=seed, torch_device=torch_device)
     spec = {**plugin.model_spec(preset, **options), "data": fingerprint, "seed": seed}
     if teacher is not None:
         spec["teacher"] = teacher.key
@@ -109,8 +112,10 @@ def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, method: 
     if not meta_path.is_file():
         folder.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter()
-        plugin.train_for_bench(data, folder / "run", preset, seed=seed, torch_device=torch_device,
-                               teacher=None if teacher is None else teacher.baked, **options)
+        if teacher is not None:
+            options["teacher"] = str(teacher.baked)
+        plugin.train(str(data), folder / "run", preset, seed=seed, torch_device=torch_device,
+                     **options)
         minutes = (time.perf_counter() - start) / 60.0
         plugin.bake_run(folder / "run", baked)
         write_atomic(meta_path, json.dumps({"spec": spec, "train_minutes": minutes}, indent=2))

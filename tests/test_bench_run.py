@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from bench import run
+from bench.result import RowResult
 from clrender.data import make_scene
 
 
@@ -81,11 +82,10 @@ def fake_training(monkeypatch):
 
     def measure_row(baked, test_set, render, **kw):
         ms = {"median": 10.0, "p10": 9.0, "p90": 11.0, "min": 9.0, "n": 4}
-        return {"PSNR": 20.0 + int(baked.name), "SSIM": 0.8, "LPIPS": None, "time": ms,
-                "wall_ms": 11.0,
-                "stages": {"intersect": 1.0}, "Coverage": 0.5, "size_MB": 1.0,
-                "time_at": {800: ms}, "sample": np.zeros((2, 2, 3), np.float32),
-                "time_note": "fake"}
+        return RowResult(psnr=20.0 + int(baked.name), ssim=0.8, lpips=None, time=ms,
+                         wall_ms=11.0, stages={"intersect": 1.0}, stats={"Coverage": 0.5},
+                         size_MB=1.0, time_note="fake", time_at={800: ms},
+                         sample=np.zeros((2, 2, 3), np.float32))
 
     cam = SimpleNamespace(width=4, height=4)
     monkeypatch.setattr(cache, "ensure_model", ensure_model)

@@ -33,9 +33,10 @@ def test_run_writes_every_preset_to_one_csv_and_png(tmp_path, monkeypatch, capsy
     """The command's plumbing, training replaced by a stand-in: presets in the order given,
     one CSV and one PNG for all of them."""
     def fake_curve(root, data, fingerprint, preset, seed=0, **kwargs):
-        return [{"preset": preset, "seed": seed, "step": s, "train_seconds": 10.0 * s,
-                 "eval_seconds": 1.0, "test_psnr": 10.0 + s, "test_ssim": 0.5,
-                 "train_psnr": None if s else 12.0} for s in (0, 1, 2)]
+        return [{"method": "ngprt", "preset": preset, "seed": seed, "step": s,
+                 "train_seconds": 10.0 * s, "eval_seconds": 1.0, "test_psnr": 10.0 + s,
+                 "test_ssim": 0.5, "train_psnr": None if s else 12.0,
+                 "teacher_test_psnr": None} for s in (0, 1, 2)]
 
     monkeypatch.setattr(train_curve, "measure_curve", fake_curve)
     (tmp_path / "scene").mkdir()
