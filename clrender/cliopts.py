@@ -74,7 +74,7 @@ def chosen(args: argparse.Namespace, kind: str, method: str) -> dict:
     foreign = sorted(f for f in given if method not in flags[f])
     if foreign:
         owners = "; ".join(f"{f} is for {', '.join(flags[f])}" for f in foreign)
-        what = f"--method {method}" if kind == "train" else f"a {method} model"
+        what = f"--method {method}" if kind == "train" else f"a model of method {method}"
         raise ValueError(f"{', '.join(foreign)} do{'es' if len(foreign) == 1 else ''} not "
                          f"apply to {what} ({owners})")
     declared = _declared(methods.get(method), kind)
