@@ -86,3 +86,45 @@ def test_tiny_curve_measures_the_deployed_model_without_changing_training(tmp_pa
     plain = train(scene, tmp_path / "plain", preset="tiny", iterations=20, progress=False)
     curve, plain = (torch.load(d / "checkpoint.pt", weights_only=True) for d in (run_dir, plain))
     torch.testing.assert_close(curve["model"], plain["model"], rtol=0, atol=0)
+
+
+@pytest.mark.slow
+def test_ndrf_curve_through_its_step_hook(tmp_path, monkeypatch, one_torch_thread):
+    """`train-curve --method ndrf`: the teacher from the model cache (here a random NGP-RT
+    model) drawn as a line, the in-memory bake of the last step equal to the run's baked
+    checkpoint evaluated as the tables do, and the training unchanged by the hook."""
+    import torch
+
+    from bench import cache
+    from clrender.data import make_scene
+    from clrender.evaluate import evaluate
+    from clrender.ndrf.train import bake_run
+    from clrender.ngprt.baked import save_baked
+    from clrender.ngprt.config import preset
+    from clrender.ngprt.random_model import random_baked_model
+    from clrender import methods
+
+    scene = make_scene("bounded", tmp_path / "scene", seed=1, n_train=6, n_test=2, width=24,
+                       height=24)
+    teacher = save_baked(random_baked_model(preset("tiny", variant="sum"), seed=2),
+                         tmp_path / "teacher.npz")
+    asked = []
+
+    def ensure_model(root, data, fingerprint, preset, method, options, **kw):
+        asked.append((method, options))
+        return cache.ModelEntry("teacher-key", teacher, tmp_path, 0.0)
+
+    monkeypatch.setattr(cache, "ensure_model", ensure_model)
+    points = train_curve.measure_curve(tmp_path / "cache", scene, "fp", "tiny", iterations=30,
+                                       progress=False, method="ndrf")
+    assert asked == [("ngprt", {"variant": "separate-v", "L": 2})]
+    assert [p["step"] for p in points] == train_curve.eval_steps(30, 25) == [0, 25, 29]
+    line = evaluate(teacher, scene)["mean"]["psnr"]
+    assert all(p["method"] == "ndrf" and p["teacher_test_psnr"] == line for p in points)
+    (run_dir,) = (tmp_path / "cache" / "curves").glob("*/run")
+    tables = evaluate(bake_run(run_dir, tmp_path / "student.npz"), scene)
+    assert points[-1]["test_psnr"] == pytest.approx(tables["mean"]["psnr"], abs=1e-6)
+    plain = methods.get("ndrf").train(str(scene), tmp_path / "plain", "tiny", iterations=30,
+                                      progress=False, teacher=str(teacher))
+    curve, plain = (torch.load(d / "checkpoint.pt", weights_only=True) for d in (run_dir, plain))
+    torch.testing.assert_close(curve["model"], plain["model"], rtol=0, atol=0)
