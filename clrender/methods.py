@@ -164,7 +164,8 @@ RENDERER_ATTRIBUTES = {"RENDER_OPTIONS": dict, "SCALAR_STATS": dict, "TIME_NOTE"
 
 def check(plugin) -> list[str]:
     """What ``plugin`` lacks of :class:`Method` (empty: it conforms)."""
-    problems = [f"{a} should be {getattr(t, '__name__', t)}, is {type(getattr(plugin, a, None)).__name__}"
+    problems = [f"{a} should be {getattr(t, '__name__', t)}, is "
+                f"{type(getattr(plugin, a, None)).__name__}"
                 for a, t in ATTRIBUTES.items() if not isinstance(getattr(plugin, a, None), t)]
     problems += [f"{h} is not callable" for h in HOOKS if not callable(getattr(plugin, h, None))]
     if problems:

@@ -72,13 +72,15 @@ def test_method_meets_the_contract(name):
 def test_registry_formats_presets_and_clear_errors(tmp_path):
     formats = [methods.get(n).FORMAT for n in methods.names()]
     assert len(set(formats)) == len(formats)
-    assert set(methods.all_presets()) == {p for n in methods.names() for p in methods.get(n).PRESETS}
+    presets = {p for n in methods.names() for p in methods.get(n).PRESETS}
+    assert set(methods.all_presets()) == presets
     with pytest.raises(ValueError, match=r"unknown method 'gsplat'; methods: "
                                          + ", ".join(methods.names())):
         methods.get("gsplat")
     problems = methods.check(SimpleNamespace(FORMAT="x", PRESETS=("a",)))
     assert "DEFAULT_PRESET should be str, is NoneType" in problems
-    assert "train is not callable" in problems and "Renderer should be type, is NoneType" in problems
+    assert "train is not callable" in problems
+    assert "Renderer should be type, is NoneType" in problems
 
 
 def test_old_run_folders_without_a_method_are_ngprt(tmp_path):
@@ -106,7 +108,8 @@ def test_load_and_render_either_method(models, method):
 
 
 def test_render_options_are_checked_per_method(models):
-    with pytest.raises(ValueError, match=r"render options \['use_G'\] do not apply to method 'ndrf'"):
+    with pytest.raises(ValueError,
+                       match=r"render options \['use_G'\] do not apply to method 'ndrf'"):
         clrender.Renderer(models["ndrf"], use_G=False)
     with pytest.raises(ValueError, match=r"option 'use_G' takes bool, got 0"):
         clrender.Renderer(models["ngprt"], use_G=0)
@@ -127,7 +130,8 @@ def test_evaluate_and_cli_on_either_method(models, scene, method, tmp_path, caps
                for c in test.cameras]
     assert result["n_views"] == 2 and result["mean"]["psnr"] == pytest.approx(
         np.mean([psnr(r, gt) for r, gt in zip(renders, test.images)]), abs=1e-9)
-    assert sorted(p.name for p in (tmp_path / "views").iterdir()) == ["test_000.png", "test_001.png"]
+    assert sorted(p.name for p in (tmp_path / "views").iterdir()) == ["test_000.png",
+                                                                      "test_001.png"]
     assert cli.main(["eval", str(models[method]), str(scene)]) == 0
     assert json.loads(capsys.readouterr().out)["psnr"] == pytest.approx(result["mean"]["psnr"])
     gif = tmp_path / "orbit.gif"
@@ -146,7 +150,8 @@ def test_cli_options_are_the_chosen_methods(models, scene, tmp_path, capsys):
     assert cli.main(["train", str(scene), "--method", "ndrf", "--out", out]) == 2
     assert "--method ndrf needs --teacher" in capsys.readouterr().err
     assert cli.main(["eval", str(models["ndrf"]), str(scene), "--no-G"]) == 2
-    assert "--no-G does not apply to a model of method ndrf (--no-G is for ngprt)" in capsys.readouterr().err
+    assert "--no-G does not apply to a model of method ndrf (--no-G is for ngprt)" \
+        in capsys.readouterr().err
     assert cli.main(["eval", str(models["ndrf"]), str(scene), "--hits", "embree"]) == 0
     capsys.readouterr()
     assert cli.main(["eval", str(models["ngprt"]), str(scene), "--no-G"]) == 0

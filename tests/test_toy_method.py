@@ -97,7 +97,8 @@ def test_eval_and_render_commands(toy, baked, scene, tmp_path, capsys):
     ref = evaluate(baked, scene, gain=0.9)["mean"]
     assert mean["psnr"] == pytest.approx(ref["psnr"]) and mean["hit"] == ref["hit"] > 0
     assert cli.main(["eval", str(baked), str(scene), "--no-G"]) == 2
-    assert "--no-G does not apply to a model of method toy (--no-G is for ngprt)" in capsys.readouterr().err
+    assert "--no-G does not apply to a model of method toy (--no-G is for ngprt)" \
+        in capsys.readouterr().err
     for path, extra in (("orbit", []), ("test", ["--data", str(scene)])):
         frames = tmp_path / path
         assert cli.main(["render", str(baked), "--path", path, "--frames", "2", "--width", "16",

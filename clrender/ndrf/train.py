@@ -229,7 +229,8 @@ def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None
         shader.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
         start = int(state["step"])
-    hook = None if on_step is None else (lambda step: on_step(step, lambda: bake_shader(shader, bg)))
+    hook = None if on_step is None else \
+        (lambda step: on_step(step, lambda: bake_shader(shader, bg)))
     _loop(shader, opt, views, torch.as_tensor(bg, device=dev), start, tcfg, seed, run, progress,
           hook)
     return run.dir

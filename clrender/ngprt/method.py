@@ -45,23 +45,26 @@ def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
     :data:`clrender.methods.StepHook` (``bake()``: the training state baked in memory)."""
     from .train import train as train_ngprt
 
-    hook = None
-    if on_step is not None:
-        from ..data import load_dataset
-        from .bake import bake_state
-        from .baked import validate
-
-        train_set = data if hasattr(data, "images") else load_dataset(data, split="train")
-
-        def bake(model, occ, gamma):
-            baked = bake_state(model, occ.binary, gamma, train_set)
-            validate(baked, "in-memory NGP-RT model")
-            return baked
-
-        def hook(step, model, occ, gamma):
-            on_step(step, lambda: bake(model, occ, gamma))
     return train_ngprt(data, out, preset=preset, variant=variant, L=L, iterations=iterations,
-                       seed=seed, device=torch_device, progress=progress, on_step=hook)
+                       seed=seed, device=torch_device, progress=progress,
+                       on_step=None if on_step is None else _step_hook(data, on_step))
+
+
+def _step_hook(data, on_step):
+    """NGP-RT's ``on_step(step, model, occ, gamma)`` as ``on_step(step, bake)``: ``bake()``
+    bakes the training state in memory, culled with the training cameras as ``bake_run``."""
+    from ..data import load_dataset
+    from .bake import bake_state
+    from .baked import validate
+
+    train_set = data if hasattr(data, "images") else load_dataset(data, split="train")
+
+    def bake(model, occ, gamma):
+        baked = bake_state(model, occ.binary, gamma, train_set)
+        validate(baked, "in-memory NGP-RT model")
+        return baked
+
+    return lambda step, model, occ, gamma: on_step(step, lambda: bake(model, occ, gamma))
 
 
 def train_steps(preset: str, iterations: int | None = None) -> tuple[int, int]:

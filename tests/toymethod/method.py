@@ -94,13 +94,15 @@ class Renderer:
         ctx = self.runtime.context
         bufs = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
                 for a in (origins, dirs)]
-        rgb_buf, hit_buf = cl.Buffer(ctx, mf.WRITE_ONLY, 12 * n), cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n)
+        rgb_buf = cl.Buffer(ctx, mf.WRITE_ONLY, 12 * n)
+        hit_buf = cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n)
         colour = _shown(self.model, self.gain)
         args = [*bufs, *map(F32, (0, 0, 0, self.model.config.radius, *colour, *bg)), np.int32(n),
                 rgb_buf, hit_buf]
         event = self.kernel(q, (n,), None, *args)
         ms = event_ms(event)
-        rgb, hit = np.empty((camera.height, camera.width, 3), F32), np.empty((camera.height, camera.width), F32)
+        rgb = np.empty((camera.height, camera.width, 3), F32)
+        hit = np.empty((camera.height, camera.width), F32)
         cl.enqueue_copy(q, rgb, rgb_buf)
         cl.enqueue_copy(q, hit, hit_buf)
         out = {"rgb": rgb, "ms_shade": ms, "ms": ms}
