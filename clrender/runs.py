@@ -14,6 +14,7 @@ Examples:
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 from typing import Callable, Iterator
@@ -28,6 +29,26 @@ def pick_device(device=None) -> torch.device:
     if device is None:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     return torch.device(device)
+
+
+def training_data(data):
+    """(the train split, its folder for the run's config or None): ``data`` is a dataset
+    folder or an already loaded :class:`clrender.data.Dataset`."""
+    if hasattr(data, "images"):
+        return data, None
+    from .data import load_dataset
+
+    return load_dataset(data, split="train"), str(Path(data).resolve())
+
+
+def set_lr(opt: torch.optim.Optimizer, lr: float) -> None:
+    for group in opt.param_groups:
+        group["lr"] = lr
+
+
+def mse_psnr(mse: float) -> float:
+    """PSNR in dB of a mean squared error of images in [0, 1] (floored at 1e-10)."""
+    return -10.0 * math.log10(max(mse, 1e-10))
 
 
 class RunFolder:
@@ -67,6 +88,16 @@ class RunFolder:
         if not (self.resumable and self.checkpoint_path.is_file()):
             return None
         return torch.load(self.checkpoint_path, map_location=device, weights_only=True)
+
+    def resume(self, model: torch.nn.Module, opt: torch.optim.Optimizer, device) -> dict | None:
+        """When resumable, load the checkpoint's ``model`` and ``optimizer`` entries into
+        ``model`` and ``opt``; returns the whole state (``step`` and the method's own
+        entries), or None to start afresh."""
+        state = self.resume_state(device)
+        if state is not None:
+            model.load_state_dict(state["model"])
+            opt.load_state_dict(state["optimizer"])
+        return state
 
     def save_checkpoint(self, state: dict) -> None:
         """Atomic: written to a temporary file, then moved over ``checkpoint.pt``."""

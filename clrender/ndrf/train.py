@@ -25,7 +25,6 @@ References: NDRF (Wan et al., CVPR 2023) §3.3, §4.1 "Optimization Details"; su
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -33,7 +32,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..runs import RunFolder, pick_device
+from ..runs import RunFolder, mse_psnr, pick_device, set_lr, training_data
 from .baked import NDRFModel, save_baked, validate
 from .config import NDRFConfig, preset as ndrf_preset
 from .init import initial_model, load_meshes
@@ -169,10 +168,9 @@ def _meshes(out: Path, reuse: bool, teacher, cfg, ecfg, cameras, progress):
     return meshes
 
 
-def _config_json(ds, data, cfg, tcfg, ecfg, teacher_id, preset, seed) -> dict:
+def _config_json(ds, data_path, cfg, tcfg, ecfg, teacher_id, preset, seed) -> dict:
     conf = {"method": "ndrf", "model": cfg.to_dict(), "train": asdict(tcfg),
-            "extract": asdict(ecfg),
-            "data": None if hasattr(data, "images") else str(Path(data).resolve()),
+            "extract": asdict(ecfg), "data": data_path,
             "teacher": teacher_id, "preset": preset, "seed": int(seed),
             "background": [float(v) for v in np.asarray(ds.background).reshape(3)]}
     return json.loads(json.dumps(conf))
@@ -199,14 +197,10 @@ def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None
     """
     dev = pick_device(device)
     torch.manual_seed(seed)
-    if hasattr(data, "images"):
-        ds = data
-    else:
-        from ..data import load_dataset
-        ds = load_dataset(data, split="train")
+    ds, data_path = training_data(data)
     cfg, tcfg, ecfg = configs(preset, iterations, train_config, **options)
     teacher_model, teacher_id = _teacher_info(teacher)
-    run = RunFolder(out, _config_json(ds, data, cfg, tcfg, ecfg, teacher_id, preset, seed))
+    run = RunFolder(out, _config_json(ds, data_path, cfg, tcfg, ecfg, teacher_id, preset, seed))
     if not run.resumable:
         run.forget(run.dir / "meshes" / "report.json")
     meshes = _meshes(run.dir, run.resumable, teacher_model, cfg, ecfg, ds.cameras, progress)
@@ -224,11 +218,8 @@ def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None
         views["distill"] = ViewSet.build(meshes, cams, images, dev)
     opt = torch.optim.Adam(shader.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas),
                            eps=tcfg.eps)
-    start, state = 0, run.resume_state(dev)
-    if state is not None:
-        shader.load_state_dict(state["model"])
-        opt.load_state_dict(state["optimizer"])
-        start = int(state["step"])
+    state = run.resume(shader, opt, dev)
+    start = 0 if state is None else int(state["step"])
     hook = None if on_step is None else \
         (lambda step: on_step(step, lambda: bake_shader(shader, bg)))
     _loop(shader, opt, views, torch.as_tensor(bg, device=dev), start, tcfg, seed, run, progress,
@@ -254,8 +245,7 @@ def _loop(shader, opt, views, bg, start, tcfg, seed, run, progress, on_step=None
             (min(tcfg.patch, vs.height), min(tcfg.patch, vs.width))
         y0, x0 = int(rng.integers(vs.height - ph + 1)), int(rng.integers(vs.width - pw + 1))
         lr = learning_rate(step, tcfg)
-        for g in opt.param_groups:
-            g["lr"] = lr
+        set_lr(opt, lr)
         inputs = vs.window(i, y0, x0, ph, pw, shader.config.kernel_size - 1)
         rgb = shader(*inputs, background=bg)
         target = vs.images[i, y0:y0 + ph, x0:x0 + pw].float()
@@ -264,7 +254,7 @@ def _loop(shader, opt, views, bg, start, tcfg, seed, run, progress, on_step=None
         loss.backward()
         opt.step()
         mse = float(loss.detach())
-        psnr = -10.0 * math.log10(max(mse, 1e-10))
+        psnr = mse_psnr(mse)
         run.bar.set_postfix(phase=phase, psnr=f"{psnr:.2f}")
         run.after_step(step, lambda: {"phase": phase, "loss": mse, "psnr": psnr, "lr": lr,
                                       "view": i},

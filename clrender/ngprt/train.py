@@ -15,7 +15,6 @@ S2.4 (optimisation); Instant-NGP / nerfacc occupancy grid.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -23,7 +22,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..runs import RunFolder, pick_device
+from ..runs import RunFolder, mse_psnr, pick_device, set_lr, training_data
 from . import torch_ops as ops
 from .config import ModelConfig, preset as model_preset
 from .model import NGPRT, render_rays
@@ -247,25 +246,19 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
     """
     dev = pick_device(device)
     torch.manual_seed(seed)
-    in_memory = hasattr(data, "images")
-    if not in_memory:
-        from ..data import load_dataset
-    ds = data if in_memory else load_dataset(data, split="train")
+    ds, data_path = training_data(data)
     cfg = model_preset(preset, variant=variant, L=L, scene=ds.scene)
     tcfg = train_config or TRAIN_PRESETS[preset]
     if iterations is not None:
         tcfg = replace(tcfg, iterations=int(iterations))
     run = RunFolder(out, {"method": "ngprt", "model": cfg.to_dict(), "train": asdict(tcfg),
-                          "data": None if in_memory else str(Path(data).resolve()),
-                          "preset": preset, "seed": seed,
+                          "data": data_path, "preset": preset, "seed": seed,
                           "background": [float(v) for v in ds.background]})
     model = NGPRT(cfg).to(dev)
     opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas), eps=tcfg.eps)
     occ, gamma, start = OccupancyGrid(cfg, dev), tcfg.gamma_init, 0
-    state = run.resume_state(dev)
+    state = run.resume(model, opt, dev)
     if state is not None:
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optimizer"])
         occ.ema, occ.binary = state["occ_ema"].to(dev), state["occ_binary"].to(dev)
         gamma, start = float(state["gamma"]), int(state["step"])
     run.write_config()
@@ -282,8 +275,7 @@ def _loop(model, opt, occ, gamma, start, sampler, tcfg, run, progress, on_step=N
             occ.update(model, step, tcfg.occ_warmup, tcfg.occ_fraction, tcfg.occ_decay,
                        tcfg.occ_threshold)
         lr, eta = schedule(step, tcfg)
-        for g in opt.param_groups:
-            g["lr"] = lr
+        set_lr(opt, lr)
         o, d, target, bg = sampler.sample(n_rays)
         r = render_rays(model, o, d, occ.binary, gamma, bg)
         s = float(torch.tensor(gamma * model.cfg.s0, dtype=torch.float32))
@@ -302,8 +294,7 @@ def _loop(model, opt, occ, gamma, start, sampler, tcfg, run, progress, on_step=N
         gamma = tune_gamma(gamma, n_bar, tcfg)
         n_rays_used = len(o)
         n_rays = int(min(tcfg.max_rays, max(64, n_rays * tcfg.target_samples / max(1, n_samples))))
-        mse = float(F.mse_loss(r["rgb"].detach(), target))
-        psnr = -10.0 * math.log10(max(mse, 1e-10))
+        psnr = mse_psnr(float(F.mse_loss(r["rgb"].detach(), target)))
         run.bar.set_postfix(loss=f"{float(loss.detach()):.4f}", psnr=f"{psnr:.2f}",
                             gamma=f"{gamma:.3f}", spr=f"{n_bar:.1f}")
         run.after_step(step, lambda: {
