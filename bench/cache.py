@@ -96,6 +96,9 @@ def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, method: 
             training as a baked file.
     """
     plugin = methods.get(method)
+    if preset not in plugin.PRESETS:
+        raise ValueError(f"preset {preset!r}: method {method!r} has presets "
+                         f"{', '.join(plugin.PRESETS)}")
     options = dict(options)
     teacher = None
     if "teacher" in options:

@@ -19,8 +19,12 @@ Examples:
 """
 from __future__ import annotations
 
+import functools
 import inspect
 import json
+import sys
+import types
+import typing
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -154,19 +158,38 @@ class Method(Protocol):
         """Add the method's own ``clrender`` sub-commands (may add none)."""
 
 
-ATTRIBUTES = {"FORMAT": str, "PRESETS": tuple, "DEFAULT_PRESET": str, "TRAIN_OPTIONS": dict,
-              "TEACHER": (str, type(None)), "ABLATIONS": (Path, type(None)),
-              "CURVE_TABLE": (str, type(None)), "LEGACY_RUNS": bool, "Renderer": type}
-HOOKS = ("load_baked", "train", "train_steps", "bake_run", "check_model_options", "model_spec",
-         "add_commands")
-RENDERER_ATTRIBUTES = {"RENDER_OPTIONS": dict, "SCALAR_STATS": dict, "TIME_NOTE": str}
+def _runtime_types(hint) -> tuple:
+    """The classes ``isinstance`` checks for an annotation (``str | None``: str, NoneType;
+    ``Mapping[str, Option]``: Mapping; ``ClassVar[X]``: X's)."""
+    origin = typing.get_origin(hint)
+    if origin is typing.ClassVar:
+        return _runtime_types(typing.get_args(hint)[0])
+    if origin in (typing.Union, types.UnionType):
+        return tuple(t for a in typing.get_args(hint) for t in _runtime_types(a))
+    return (origin or hint,)
+
+
+def _declared(protocol) -> dict[str, tuple]:
+    """{attribute: runtime classes} a Protocol declares (``Any`` ones left out)."""
+    hints = typing.get_type_hints(protocol)
+    return {name: _runtime_types(h) for name, h in hints.items() if h is not Any}
+
+
+def _hooks(protocol) -> list[str]:
+    return [n for n, v in vars(protocol).items() if callable(v) and not n.startswith("_")]
+
+
+ATTRIBUTES, HOOKS = _declared(Method), _hooks(Method)
+RENDERER_ATTRIBUTES = _declared(MethodRenderer)
 
 
 def check(plugin) -> list[str]:
     """What ``plugin`` lacks of :class:`Method` (empty: it conforms)."""
-    problems = [f"{a} should be {getattr(t, '__name__', t)}, is "
-                f"{type(getattr(plugin, a, None)).__name__}"
-                for a, t in ATTRIBUTES.items() if not isinstance(getattr(plugin, a, None), t)]
+    problems = [f"{a} is missing" if not hasattr(plugin, a) else
+                f"{a} should be {' or '.join(c.__name__ for c in t)}, is "
+                f"{type(getattr(plugin, a)).__name__}"
+                for a, t in ATTRIBUTES.items() if not isinstance(getattr(plugin, a, None), t)
+                or not hasattr(plugin, a)]
     problems += [f"{h} is not callable" for h in HOOKS if not callable(getattr(plugin, h, None))]
     if problems:
         return problems
@@ -175,8 +198,8 @@ def check(plugin) -> list[str]:
     problems += [f"TRAIN_OPTIONS[{k!r}] is not an Option" for k, v in plugin.TRAIN_OPTIONS.items()
                  if not isinstance(v, Option)]
     r = plugin.Renderer
-    problems += [f"Renderer.{a} should be {t.__name__}" for a, t in RENDERER_ATTRIBUTES.items()
-                 if not isinstance(getattr(r, a, None), t)]
+    problems += [f"Renderer.{a} should be {' or '.join(c.__name__ for c in t)}"
+                 for a, t in RENDERER_ATTRIBUTES.items() if not isinstance(getattr(r, a, None), t)]
     if problems:
         return problems
     problems += [f"Renderer.RENDER_OPTIONS[{k!r}] is not an Option"
@@ -192,6 +215,12 @@ def check(plugin) -> list[str]:
 
 
 def _entry_points() -> dict[str, metadata.EntryPoint]:
+    return _entry_points_on(tuple(sys.path))
+
+
+@functools.lru_cache(maxsize=8)
+def _entry_points_on(path: tuple) -> dict[str, metadata.EntryPoint]:
+    """The group's entry points installed on ``path`` (sys.path; scanned once per path)."""
     found: dict[str, metadata.EntryPoint] = {}
     for ep in metadata.entry_points(group=GROUP):
         if ep.name in found and found[ep.name].value != ep.value:

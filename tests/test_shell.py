@@ -77,10 +77,11 @@ def test_registry_formats_presets_and_clear_errors(tmp_path):
     with pytest.raises(ValueError, match=r"unknown method 'gsplat'; methods: "
                                          + ", ".join(methods.names())):
         methods.get("gsplat")
-    problems = methods.check(SimpleNamespace(FORMAT="x", PRESETS=("a",)))
-    assert "DEFAULT_PRESET should be str, is NoneType" in problems
-    assert "train is not callable" in problems
-    assert "Renderer should be type, is NoneType" in problems
+    problems = methods.check(SimpleNamespace(FORMAT="x", PRESETS=["a"], TEACHER=None))
+    assert problems[:3] == ["PRESETS should be tuple, is list", "DEFAULT_PRESET is missing",
+                            "TRAIN_OPTIONS is missing"]
+    assert "train is not callable" in problems and "Renderer is missing" in problems
+    assert not any(p.startswith(("FORMAT", "TEACHER")) for p in problems)
 
 
 def test_old_run_folders_without_a_method_are_ngprt(tmp_path):
