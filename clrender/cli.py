@@ -112,7 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", default=methods.DEFAULT, choices=methods.names())
     s.add_argument("--out", required=True, help="run folder (checkpoints, config, log)")
     s.add_argument("--preset", default=None, choices=methods.all_presets(),
-                   help="the method's preset (default: its DEFAULT_PRESET, `cpu` for both)")
+                   help="the method's preset (default: its DEFAULT_PRESET)")
     s.add_argument("--iterations", type=int, default=None, help="override the preset's count")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--torch-device", default=None, help="torch device (default cuda if present)")
