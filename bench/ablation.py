@@ -1,12 +1,16 @@
-"""Ablation table specs: ``ablations/<method>/<table>.toml`` loaded into dataclasses.
+"""Ablation table specs: the TOML files of each method's ``ABLATIONS`` folder (shipped
+with its plug-in: ``clrender/ngprt/ablations/table4.toml``) loaded into dataclasses.
 
-A table names its method (rows may override it); each row names free-form ``model``
-options (what is trained: NGP-RT ``variant``, ``L``; NDRF ``thresholds``, ``teacher``, ...)
-and ``render`` options (NGP-RT ``use_G``), checked by the method's plug-in.
+Tables are keyed by (method, name), ``name`` the file's stem; a name two methods use is
+asked for as ``method/name``. A table names its method (rows may override it); each row
+names ``model`` options (what is trained, checked by the row's method's
+``check_model_options``: NGP-RT ``variant``, ``L``; NDRF ``thresholds``, ``teacher``, ...)
+and ``render`` options (its Renderer's ``RENDER_OPTIONS``: NGP-RT ``use_G``).
 """
 from __future__ import annotations
 
 import sys
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,9 +19,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+from bench import columns
 from clrender import methods
-
-ABLATIONS_DIR = Path(__file__).resolve().parent.parent / "ablations"
 
 
 @dataclass(frozen=True)
@@ -34,9 +37,10 @@ class Row:
 
 @dataclass(frozen=True)
 class Table:
-    """A paper table to reproduce (one TOML file under ablations/<method>/)."""
+    """A paper table to reproduce (one TOML file of a method's ``ABLATIONS`` folder)."""
 
-    key: str
+    key: str                        # a name, or method/name (list_tables)
+    method: str
     title: str
     paper_source: str
     scene: str
@@ -46,14 +50,44 @@ class Table:
     show_stages: bool = False       # a column with the per-stage times (NDRF tables)
     timing_sizes: tuple[int, ...] = ()   # frame widths also timed (test cameras scaled)
 
+    @property
+    def stem(self) -> str:
+        """The name of the table's result files (``results/<stem>.md``)."""
+        return file_stem(self.key)
 
-def _paths() -> dict[str, Path]:
-    return {p.stem: p for p in sorted(ABLATIONS_DIR.glob("*/*.toml"))}
+
+def file_stem(key: str) -> str:
+    """The result files' name of the table ``key`` (``method/name`` -> ``method-name``)."""
+    return key.replace("/", "-")
+
+
+def _paths() -> dict[tuple[str, str], Path]:
+    """{(method, name): TOML path} over every registered method's ABLATIONS folder."""
+    found: dict[tuple[str, str], Path] = {}
+    for method in methods.names():
+        folder = methods.get(method).ABLATIONS
+        for path in sorted(folder.glob("*.toml")) if folder is not None else ():
+            found[(method, path.stem)] = path
+    return found
+
+
+def _keys(paths: dict) -> dict[tuple[str, str], str]:
+    """{(method, name): key}: the bare name where one method has it, else ``method/name``
+    (its files ``method-name.*``). Two tables whose files would collide are refused."""
+    counts = Counter(name for _, name in paths)
+    keys = {(m, n): n if counts[n] == 1 else f"{m}/{n}" for m, n in paths}
+    files = Counter(k.replace("/", "-") for k in keys.values())
+    clash = sorted(f for f, c in files.items() if c > 1)
+    if clash:
+        raise ValueError(f"tables would write the same results {clash}: "
+                         + ", ".join(str(paths[mn]) for mn, k in keys.items()
+                                     if k.replace("/", "-") in clash))
+    return keys
 
 
 def list_tables() -> list[str]:
-    """Names of the tables under ablations/, sorted."""
-    return sorted(_paths())
+    """The tables' keys, sorted: a bare name, or ``method/name`` where names collide."""
+    return sorted(_keys(_paths()).values())
 
 
 def _row(spec: dict, i: int, r: dict, path: Path) -> Row:
@@ -69,10 +103,15 @@ def _row(spec: dict, i: int, r: dict, path: Path) -> Row:
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{path}: row {i} ({r.get('name')!r}): {exc}") from exc
     allowed = plugin.Renderer.RENDER_OPTIONS
-    bad = {k: v for k, v in render.items() if not isinstance(v, allowed.get(k, ()))}
-    if bad:
-        raise ValueError(f"{path}: row {i}: render options {sorted(bad)} are not among "
-                         f"{ {k: t.__name__ for k, t in allowed.items()} }")
+    unknown = sorted(set(render) - set(allowed))
+    if unknown:
+        raise ValueError(f"{path}: row {i}: render options {unknown} are not among "
+                         f"{sorted(allowed)} of method {method!r}")
+    try:
+        for name, value in render.items():
+            allowed[name].check(name, value)
+    except ValueError as exc:
+        raise ValueError(f"{path}: row {i} ({r.get('name')!r}): {exc}") from exc
     unknown = set(r.get("paper", {})) - set(spec["paper_columns"])
     if unknown:
         raise ValueError(f"{path}: row {i} has paper figures for unknown columns {sorted(unknown)}")
@@ -81,10 +120,14 @@ def _row(spec: dict, i: int, r: dict, path: Path) -> Row:
 
 
 def load_table(key: str) -> Table:
-    """Parse and check the table ``key`` (``ablations/*/<key>.toml``)."""
-    path = _paths().get(key)
-    if path is None:
-        raise ValueError(f"unknown table {key!r}; tables: {', '.join(list_tables())}")
+    """Parse and check the table ``key`` (a name, or ``method/name``; :func:`list_tables`)."""
+    paths = _paths()
+    keys = _keys(paths)
+    found = [mn for mn, k in keys.items() if key in (k, "/".join(mn))]
+    if not found:
+        raise ValueError(f"unknown table {key!r}; tables: {', '.join(sorted(keys.values()))}")
+    (method, _), path = found[0], paths[found[0]]
+    key = keys[found[0]]
     try:
         spec = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
@@ -92,12 +135,20 @@ def load_table(key: str) -> Table:
     missing = {"title", "paper_source", "scene", "preset", "paper_columns", "rows"} - set(spec)
     if missing:
         raise ValueError(f"{path}: missing keys {sorted(missing)}")
+    if spec.setdefault("method", method) != method:
+        raise ValueError(f"{path}: a table of method {method!r} names method "
+                         f"{spec['method']!r}")
     rows = [_row(spec, i, r, path) for i, r in enumerate(spec["rows"])]
+    for col in spec["paper_columns"]:
+        try:
+            columns.column(col, [r.method for r in rows])
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from exc
     names = {r.name for r in rows}
     for r in rows:
         if r.baseline is not None and r.baseline not in names:
             raise ValueError(f"{path}: row {r.name!r} has unknown baseline {r.baseline!r}")
-    return Table(key=key, title=spec["title"], paper_source=spec["paper_source"],
+    return Table(key=key, method=method, title=spec["title"], paper_source=spec["paper_source"],
                  scene=spec["scene"], preset=spec["preset"],
                  paper_columns=tuple(spec["paper_columns"]), rows=tuple(rows),
                  show_stages=bool(spec.get("show_stages", False)),

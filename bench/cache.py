@@ -95,16 +95,23 @@ def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, method: 
 
     Args:
         method: the row's method; ``options`` its model options. An option ``teacher``
-            (a dict of NGP-RT model options) names a teacher that is ensured first (cached
-            like any model) and handed to the method's training as a baked file.
+            (a dict of model options of the method's ``TEACHER`` method) names a teacher
+            that is ensured first (cached like any model) and handed to the method's
+            training as a baked file.
         fingerprint, downscale: :func:`data_fingerprint` of ``data`` read at ``downscale``.
     """
     plugin = methods.get(method)
+    if preset not in plugin.PRESETS:
+        raise ValueError(f"preset {preset!r}: method {method!r} has presets "
+                         f"{', '.join(plugin.PRESETS)}")
     options = dict(options)
     teacher = None
     if "teacher" in options:
-        teacher = ensure_model(root, data, fingerprint, preset, "ngprt", options.pop("teacher"),
-                               seed=seed, torch_device=torch_device, downscale=downscale)
+        if plugin.TEACHER is None:
+            raise ValueError(f"method {method!r} takes no teacher")
+        teacher = ensure_model(root, data, fingerprint, preset, plugin.TEACHER,
+                               options.pop("teacher"), seed=seed, torch_device=torch_device,
+                               downscale=downscale)
     spec = {**plugin.model_spec(preset, **options), "data": fingerprint, "seed": seed}
     if teacher is not None:
         spec["teacher"] = teacher.key
@@ -114,9 +121,10 @@ def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, method: 
     if not meta_path.is_file():
         folder.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter()
-        plugin.train_for_bench(data, folder / "run", preset, seed=seed, torch_device=torch_device,
-                               teacher=None if teacher is None else teacher.baked,
-                               downscale=downscale, **options)
+        if teacher is not None:
+            options["teacher"] = str(teacher.baked)
+        plugin.train(str(data), folder / "run", preset, seed=seed, torch_device=torch_device,
+                     downscale=downscale, **options)
         minutes = (time.perf_counter() - start) / 60.0
         plugin.bake_run(folder / "run", baked)
         write_atomic(meta_path, json.dumps({"spec": spec, "train_minutes": minutes}, indent=2))

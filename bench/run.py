@@ -6,6 +6,7 @@
     python -m bench.run ndrf-table3 --seeds 3   # mean ± std over seeds 0, 1, 2
     python -m bench.run --list
     python -m bench.run train-curve         # test PSNR vs training minutes, `cpu` and `tiny`
+    python -m bench.run train-curve --method ndrf --preset tiny
 
 Trains what is missing (models cached by a hash of config and data, shared across
 tables), bakes, renders every test view with the OpenCL renderer and writes
@@ -53,8 +54,7 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict) -> str:
                                            downscale=args.downscale)
                 m = measure_row(entry.baked, test_set, row.render, device=args.device,
                                 repeats=args.repeats, timing_sizes=table.timing_sizes)
-                m.update(train_minutes=entry.train_minutes, model_key=entry.key)
-                per_seed.append(m)
+                per_seed.append(m.of_model(entry.train_minutes, entry.key))
                 bar.update()
             results.append(seeds.aggregate(per_seed, seed_list))
     cam = test_set.cameras[0]
@@ -84,6 +84,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="model/training preset (default: the table's, `cpu`); "
                         f"{train_curve.KEY} takes it more than once "
                         f"(default: {' and '.join(train_curve.PRESETS)})")
+    p.add_argument("--method", default=None, choices=methods.names(),
+                   help=f"{train_curve.KEY}: the method whose curve is measured "
+                        f"(default {methods.DEFAULT})")
     p.add_argument("--scene", default=None,
                    help="builtin-bounded | builtin-unbounded | a dataset folder (default: the table's)")
     p.add_argument("--downscale", type=int, default=1, metavar="N",
@@ -115,6 +118,9 @@ def main(argv=None) -> int:
         tables = [ablation.load_table(k) for k in keys]
         if not curve and len(args.presets or ()) > 1:
             raise ValueError(f"a table takes one --preset, got {', '.join(args.presets)}")
+        if not curve and args.method is not None:
+            raise ValueError(f"--method is for {train_curve.KEY}; a table names its methods")
+        args.method = args.method or methods.DEFAULT
         args.preset = None if curve else (args.presets or [None])[0]
         if args.downscale < 1 or (curve and args.downscale != 1):
             raise ValueError(f"--downscale {args.downscale}: expected a whole number >= 1, "

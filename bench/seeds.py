@@ -3,8 +3,11 @@ effect (a row against its baseline) reproduces beyond that spread."""
 from __future__ import annotations
 
 import math
+from dataclasses import fields, replace
 
 import numpy as np
+
+from bench.result import RowResult
 
 
 def _mean(values: list):
@@ -25,15 +28,17 @@ def _mean(values: list):
     return first
 
 
-def aggregate(per_seed: list[dict], seeds: list[int]) -> dict:
-    """One row's measurements (:func:`bench.measure.measure_row` dicts plus ``train_minutes``,
-    ``model_key``), one per seed, as one such dict of means (see :func:`_mean`; the sample
-    render is ``seeds[0]``'s) with ``seeds`` and ``per_seed`` (the inputs without their
-    sample render). One seed gives that seed's dict unchanged, plus those two keys."""
+def aggregate(per_seed: list[RowResult], seeds: list[int]) -> RowResult:
+    """One row's results (:func:`bench.measure.measure_row`, with their model), one per
+    seed, as one result of means (see :func:`_mean`; the sample render is ``seeds[0]``'s)
+    with ``seeds`` and ``per_seed`` (the inputs without their sample render). One seed
+    gives that seed's result unchanged, plus those two fields."""
     if len(per_seed) != len(seeds) or not seeds:
         raise ValueError(f"aggregate: {len(per_seed)} measurements for seeds {seeds}")
-    return {**_mean(per_seed), "seeds": list(seeds),
-            "per_seed": [{k: v for k, v in m.items() if k != "sample"} for m in per_seed]}
+    means = {f.name: _mean([getattr(m, f.name) for m in per_seed]) for f in fields(RowResult)
+             if f.name not in ("seeds", "per_seed")}
+    return RowResult(**means, seeds=list(seeds),
+                     per_seed=[replace(m, sample=None) for m in per_seed])
 
 
 def spread(values: list) -> dict | None:

@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from . import methods
+from . import cliopts, methods
 from .paths import PATHS
 
 
@@ -75,7 +75,14 @@ def _model_downscale(args) -> int:
 
 
 def _cmd_train(args) -> int:
-    run = methods.get(args.method).train_from_args(args)
+    plugin = methods.get(args.method)
+    preset = args.preset or plugin.DEFAULT_PRESET
+    if preset not in plugin.PRESETS:
+        raise ValueError(f"--preset {preset!r}: method {args.method!r} has presets "
+                         f"{', '.join(plugin.PRESETS)}")
+    run = plugin.train(args.data, args.out, preset, seed=args.seed, iterations=args.iterations,
+                       torch_device=args.torch_device, downscale=args.downscale,
+                       **cliopts.chosen(args, "train", args.method))
     print(f"trained {args.method} run in {run}")
     return 0
 
@@ -87,7 +94,11 @@ def _cmd_bake(args) -> int:
 
 
 def _render_options(args) -> dict:
-    return {"use_G": False} if args.no_G else {}
+    """The render options given for the model's method (another method's is an error)."""
+    from . import bakedfile
+
+    plugin = methods.for_format(bakedfile.peek_format(args.model), args.model)
+    return cliopts.chosen(args, "render", methods.name_of(plugin))
 
 
 def _cmd_render(args) -> int:
@@ -151,12 +162,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_downscale(s, 1, "default 1; bake and eval reuse it")
     s.add_argument("--method", default=methods.DEFAULT, choices=methods.names())
     s.add_argument("--out", required=True, help="run folder (checkpoints, config, log)")
-    s.add_argument("--preset", default="cpu", choices=methods.all_presets())
+    s.add_argument("--preset", default=None, choices=methods.all_presets(),
+                   help="the method's preset (default: its DEFAULT_PRESET)")
     s.add_argument("--iterations", type=int, default=None, help="override the preset's count")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--torch-device", default=None, help="torch device (default cuda if present)")
-    for name in methods.names():
-        methods.get(name).add_train_arguments(s)
+    cliopts.add_groups(s, "train")
     s.set_defaults(func=_cmd_train)
 
     s = sub.add_parser("bake", help="bake a trained run (any method) into a model file")
@@ -176,8 +187,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--background", type=float, nargs=3, default=None,
                    help="RGB in [0, 1] (default: the method's, NGP-RT white)")
     s.add_argument("--fps", type=int, default=30)
-    s.add_argument("--no-G", action="store_true", help="NGP-RT: march without the distance grid G")
     s.add_argument("--device", default=None)
+    cliopts.add_groups(s, "render")
     s.set_defaults(func=_cmd_render)
 
     s = sub.add_parser("eval", help="PSNR/SSIM and ms/frame of a baked model on test views")
@@ -186,8 +197,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--split", default="test")
     _add_downscale(s, None, "default: the model's training downscale")
     s.add_argument("--save", default=None, help="folder for the rendered test views")
-    s.add_argument("--no-G", action="store_true", help="NGP-RT: march without the distance grid G")
     s.add_argument("--device", default=None)
+    cliopts.add_groups(s, "render")
     s.set_defaults(func=_cmd_eval)
 
     s = sub.add_parser("view", help="live browser viewer of a baked model (viser)")
@@ -200,9 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_cmd_view)
 
     for name in methods.names():
-        plugin = methods.get(name)
-        if hasattr(plugin, "add_commands"):
-            plugin.add_commands(sub)
+        methods.get(name).add_commands(sub)
     return p
 
 

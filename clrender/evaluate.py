@@ -1,4 +1,5 @@
-"""Evaluating any method's baked model on a dataset split with its OpenCL renderer.
+"""Evaluating any method's baked model on a dataset split with its OpenCL renderer: the one
+render-and-score loop of the CLI (``clrender eval``) and the benchmark (``bench.measure``).
 
 Examples:
     >>> result = evaluate("/tmp/model_b.npz", "/tmp/scn_b")
@@ -14,6 +15,49 @@ import numpy as np
 from .metrics import psnr, ssim
 from .renderer import Renderer
 from .video import to_uint8, write_png
+
+
+def _lpips(rgb: np.ndarray, gt: np.ndarray):
+    """LPIPS-Alex of one view, or None where the weights are not installed or the view is
+    smaller than the network's receptive field."""
+    from .lpips import LPIPSWeightsUnavailable, lpips_alex
+
+    try:
+        return lpips_alex(rgb, gt)
+    except (LPIPSWeightsUnavailable, ValueError):
+        return None
+
+
+def score_views(renderer: Renderer, ds, lpips: bool = False, out_dir=None, prefix: str = "test"):
+    """Render every view of ``ds`` with statistics and score it against its image.
+
+    Args:
+        renderer: a :class:`clrender.Renderer`.
+        ds: a :class:`clrender.data.Dataset` (its views, images and background).
+        lpips: also score LPIPS-Alex (``lpips``: None where unavailable).
+        out_dir: when given, the renderings are written there as ``{prefix}_{i:03d}.png``.
+    Returns:
+        (per_view, first): one dict per view (``view``, ``psnr``, ``ssim``, ``ms_wall``
+        (wall time of ``render`` with statistics read back), the renderer's ``ms`` and
+        ``ms_<stage>``, the mean over pixels of each :attr:`Renderer.scalar_stats` key),
+        and the first view's render, (H, W, 3) float32 clipped to [0, 1].
+    """
+    per_view, first = [], None
+    for i, (cam, gt) in enumerate(zip(ds.cameras, ds.images)):
+        t0 = time.perf_counter()
+        out = renderer.render(cam, background=ds.background, stats=True)
+        wall = 1e3 * (time.perf_counter() - t0)
+        rgb = np.clip(out["rgb"], 0.0, 1.0)
+        view = {"view": i, "psnr": psnr(rgb, gt), "ssim": ssim(rgb, gt), "ms_wall": wall}
+        if lpips:
+            view["lpips"] = _lpips(rgb, gt)
+        view.update({k: float(v) for k, v in out.items() if k.startswith("ms")})
+        view.update({s.key: float(np.mean(out[s.key])) for s in renderer.scalar_stats.values()})
+        per_view.append(view)
+        first = rgb if first is None else first
+        if out_dir is not None:
+            write_png(Path(out_dir) / f"{prefix}_{i:03d}.png", to_uint8(rgb))
+    return per_view, first
 
 
 def evaluate(model, data, device=None, split: str = "test", out_dir=None, downscale: int = 1,
@@ -40,18 +84,7 @@ def evaluate(model, data, device=None, split: str = "test", out_dir=None, downsc
     if not ds.cameras:
         raise ValueError(f"{getattr(ds, 'path', data)}: split {split!r} has no views")
     renderer = Renderer(model, device=device, **render_options)
-    per_view = []
-    for i, (cam, gt) in enumerate(zip(ds.cameras, ds.images)):
-        t0 = time.perf_counter()
-        out = renderer.render(cam, background=ds.background, stats=True)
-        wall = 1e3 * (time.perf_counter() - t0)
-        rgb = np.clip(out["rgb"], 0.0, 1.0)
-        view = {"view": i, "psnr": psnr(rgb, gt), "ssim": ssim(rgb, gt), "ms_wall": wall}
-        view.update({k: float(v) for k, v in out.items() if k.startswith("ms")})
-        view.update({k: float(np.mean(out[k])) for k in renderer.scalar_stats.values()})
-        per_view.append(view)
-        if out_dir is not None:
-            write_png(Path(out_dir) / f"{split}_{i:03d}.png", to_uint8(rgb))
+    per_view, _ = score_views(renderer, ds, out_dir=out_dir, prefix=split)
     mean = {k: float(np.mean([v[k] for v in per_view])) for k in per_view[0] if k != "view"}
     # The first frame pays for program build and upload: report the median time too.
     mean["ms_median"] = float(np.median([v["ms"] for v in per_view]))

@@ -31,6 +31,8 @@ class Renderer:
         if unknown:
             raise ValueError(f"render options {unknown} do not apply to method "
                              f"{model.method!r}; it takes {sorted(allowed) or 'none'}")
+        for name, value in options.items():
+            allowed[name].check(name, value)
         self.impl = self.method.Renderer(model, device=device, **options)
 
     @property
@@ -39,8 +41,14 @@ class Renderer:
 
     @property
     def scalar_stats(self) -> dict:
-        """{table column: per-pixel statistic} this method reports (e.g. Marching: n_march)."""
+        """{table column: :class:`clrender.methods.Stat`} this method reports (NGP-RT:
+        Marching, the mean of ``n_march``)."""
         return dict(self.impl.SCALAR_STATS)
+
+    @property
+    def time_note(self) -> str:
+        """What the frame time ``ms`` covers (kernel times, ray casting, ...)."""
+        return self.impl.TIME_NOTE
 
     def render(self, camera, background=None, stats: bool = False) -> dict:
         """Render one view.

@@ -1,10 +1,13 @@
 """Ablation specs and the benchmark report writer (no training: measured values given)."""
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from bench import ablation, report, seeds
+from bench.result import RowResult
+from clrender import methods
 
 
 @pytest.mark.parametrize("key", ["table2", "table3", "table4"])
@@ -24,11 +27,16 @@ def test_unknown_table_lists_the_known_ones():
         ablation.load_table("table9")
 
 
-def _measured(psnr, ms):
-    return {"PSNR": psnr, "SSIM": 0.8, "time": {"median": ms, "p10": ms - 1, "p90": ms + 1,
-                                                "min": ms - 1, "n": 10},
-            "wall_ms": ms + 2, "Marching": 40.0, "Occupied": 12.5, "size_MB": 3.0,
-            "train_minutes": 1.5, "model_key": "abc", "sample": np.full((4, 4, 3), 0.5, np.float32)}
+def _time(ms):
+    return {"median": ms, "p10": ms - 1, "p90": ms + 1, "min": ms - 1, "n": 10}
+
+
+def _measured(psnr, ms, **fields):
+    m = RowResult(psnr=psnr, ssim=0.8, lpips=None, time=_time(ms), wall_ms=ms + 2, stages={},
+                  stats={"Marching": 40.0, "Occupied": 12.5}, size_MB=3.0,
+                  time_note="time per frame", sample=np.full((4, 4, 3), 0.5, np.float32),
+                  train_minutes=1.5, model_key="abc")
+    return replace(m, **fields)
 
 
 def test_write_table_puts_paper_figures_beside_ours(tmp_path):
@@ -57,7 +65,7 @@ def test_lpips_is_reported_beside_the_paper_or_as_not_measured(tmp_path):
     md = report.markdown(t, results, meta, report.effects(t, results))
     row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
     assert "| n/a | 0.299 |" in row and "LPIPS: n/a where its weights" in md
-    results = [{**_measured(25.0, 5.0), "LPIPS": 0.2}] * 3
+    results = [_measured(25.0, 5.0, lpips=0.2)] * 3
     md = report.markdown(t, results, meta, report.effects(t, results))
     row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
     assert "| 0.200 | 0.299 |" in row and "LPIPS: AlexNet, linear heads v0.1" in md
@@ -79,26 +87,47 @@ def test_speedup_is_baseline_time_over_row_time(tmp_path):
     assert data["rows"][1]["baseline"] == "L=2 w/o G" and data["rows"][1]["speedup"] == 1.2
 
 
-def test_unknown_baseline_is_an_error(tmp_path, monkeypatch):
-    (tmp_path / "ngprt").mkdir()
-    (tmp_path / "ngprt" / "bad.toml").write_text(
+def _table(folder, name, columns='["PSNR"]', baseline="", model="{ variant = \"sum\", L = 2 }"):
+    (folder / f"{name}.toml").write_text(
         'title = "t"\npaper_source = "p"\nscene = "builtin-bounded"\npreset = "cpu"\n'
-        'method = "ngprt"\npaper_columns = ["PSNR"]\nbaseline = "nope"\n'
-        '[[rows]]\nname = "a"\nmodel = { variant = "sum", L = 2 }\n')
-    monkeypatch.setattr(ablation, "ABLATIONS_DIR", tmp_path)
+        f'paper_columns = {columns}\n{baseline}\n[[rows]]\nname = "a"\nmodel = {model}\n')
+
+
+def test_unknown_baseline_and_column_are_errors(tmp_path, monkeypatch):
+    monkeypatch.setattr(methods.get("ngprt"), "ABLATIONS", tmp_path)
+    _table(tmp_path, "bad", baseline='baseline = "nope"')
     with pytest.raises(ValueError, match="unknown baseline 'nope'"):
         ablation.load_table("bad")
+    _table(tmp_path, "bad", columns='["PSNR", "Coverage"]')     # an NDRF statistic
+    with pytest.raises(ValueError, match="column 'Coverage' is none of"):
+        ablation.load_table("bad")
+    _table(tmp_path, "bad", columns='["PSNR", "March (ms)", "Occupied"]')
+    assert ablation.load_table("bad").paper_columns == ("PSNR", "March (ms)", "Occupied")
+
+
+def test_tables_are_keyed_by_method_and_name(tmp_path, monkeypatch):
+    """Two methods' `table4`: each asked for as method/name, their files apart."""
+    monkeypatch.setattr(methods.get("ndrf"), "ABLATIONS", tmp_path)
+    _table(tmp_path, "table4", model="{ kernel_size = 1, teacher = { L = 2 } }")
+    keys = ablation.list_tables()
+    assert "ndrf/table4" in keys and "ngprt/table4" in keys and "table4" not in keys
+    assert "table2" in keys and "ndrf-table3" not in keys      # the folder replaced
+    with pytest.raises(ValueError, match="unknown table 'table4'"):
+        ablation.load_table("table4")
+    t = ablation.load_table("ndrf/table4")
+    assert (t.method, t.stem, t.rows[0].model["kernel_size"]) == ("ndrf", "ndrf-table4", 1)
+    assert ablation.load_table("ngprt/table2").key == "table2"
 
 
 def test_a_table_may_mix_methods(tmp_path):
     """ndrf-teacher: an NGP-RT row (marching statistics) beside an NDRF row (coverage)."""
     t = ablation.load_table("ndrf-teacher")
     assert [r.method for r in t.rows] == ["ngprt", "ndrf"] and t.timing_sizes == (800,)
-    teacher = {**_measured(23.0, 40.0), "time_note": "kernels", "time_at": {800: _measured(0, 600.0)["time"]},
-               "stages": {"march": 30.0, "deferred": 10.0}}
-    student = {k: v for k, v in _measured(21.0, 20.0).items() if k not in ("Marching", "Occupied")}
-    student.update(Coverage=0.5, time_note="embree + kernels", time_at={800: _measured(0, 300.0)["time"]},
-                   stages={"intersect": 12.0, "gather": 3.0, "conv0": 4.0, "conv1": 1.0})
+    teacher = _measured(23.0, 40.0, time_note="kernels", time_at={800: _time(600.0)},
+                        stages={"march": 30.0, "deferred": 10.0})
+    student = _measured(21.0, 20.0, stats={"Coverage": 0.5}, time_note="embree + kernels",
+                        time_at={800: _time(300.0)},
+                        stages={"intersect": 12.0, "gather": 3.0, "conv0": 4.0, "conv1": 1.0})
     meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4",
             "git_revision": "r", "date": "d"}
     md = report.write_table(tmp_path, t, [teacher, student], meta)
@@ -111,8 +140,8 @@ def test_a_table_may_mix_methods(tmp_path):
 
 def _two_seeds(t, psnrs: dict) -> list[dict]:
     """Per row of ``t``: the aggregate of two fake seeds with the given PSNRs."""
-    return [seeds.aggregate([{**_measured(p, 10.0 + i + s), "LPIPS": 0.2 + 0.01 * s,
-                              "stages": {"intersect": 1.0 + s}}
+    return [seeds.aggregate([_measured(p, 10.0 + i + s, lpips=0.2 + 0.01 * s,
+                                       stages={"intersect": 1.0 + s})
                              for s, p in enumerate(psnrs[r.name])], [0, 1])
             for i, r in enumerate(t.rows)]
 
@@ -155,7 +184,7 @@ def test_index_lists_every_table_written_with_its_own_run(tmp_path):
     single = ablation.load_table("ndrf-thresholds")
     meta = {"device": "dev A", "preset": "cpu", "scene": "builtin-bounded", "resolution": "4x4",
             "git_revision": "r1", "date": "2026-01-01"}
-    measured = {**_measured(21.0, 20.0), "stages": {"intersect": 1.0}}
+    measured = _measured(21.0, 20.0, stages={"intersect": 1.0})
     report.write_table(tmp_path, single, [measured] * len(single.rows), meta)
     report.write_index(tmp_path)
     text = (tmp_path / "README.md").read_text()

@@ -33,9 +33,10 @@ def test_run_writes_every_preset_to_one_csv_and_png(tmp_path, monkeypatch, capsy
     """The command's plumbing, training replaced by a stand-in: presets in the order given,
     one CSV and one PNG for all of them."""
     def fake_curve(root, data, fingerprint, preset, seed=0, **kwargs):
-        return [{"preset": preset, "seed": seed, "step": s, "train_seconds": 10.0 * s,
-                 "eval_seconds": 1.0, "test_psnr": 10.0 + s, "test_ssim": 0.5,
-                 "train_psnr": None if s else 12.0} for s in (0, 1, 2)]
+        return [{"method": "ngprt", "preset": preset, "seed": seed, "step": s,
+                 "train_seconds": 10.0 * s, "eval_seconds": 1.0, "test_psnr": 10.0 + s,
+                 "test_ssim": 0.5, "train_psnr": None if s else 12.0,
+                 "teacher_test_psnr": None} for s in (0, 1, 2)]
 
     monkeypatch.setattr(train_curve, "measure_curve", fake_curve)
     (tmp_path / "scene").mkdir()
@@ -83,5 +84,47 @@ def test_tiny_curve_measures_the_deployed_model_without_changing_training(tmp_pa
     tables = evaluate(bake_run(run_dir, tmp_path / "model.npz"), scene, use_G=True)
     assert points[-1]["test_psnr"] == pytest.approx(tables["mean"]["psnr"], abs=1e-6)
     plain = train(scene, tmp_path / "plain", preset="tiny", iterations=20, progress=False)
+    curve, plain = (torch.load(d / "checkpoint.pt", weights_only=True) for d in (run_dir, plain))
+    torch.testing.assert_close(curve["model"], plain["model"], rtol=0, atol=0)
+
+
+@pytest.mark.slow
+def test_ndrf_curve_through_its_step_hook(tmp_path, monkeypatch, one_torch_thread):
+    """`train-curve --method ndrf`: the teacher from the model cache (here a random NGP-RT
+    model) drawn as a line, the in-memory bake of the last step equal to the run's baked
+    checkpoint evaluated as the tables do, and the training unchanged by the hook."""
+    import torch
+
+    from bench import cache
+    from clrender.data import make_scene
+    from clrender.evaluate import evaluate
+    from clrender.ndrf.train import bake_run
+    from clrender.ngprt.baked import save_baked
+    from clrender.ngprt.config import preset
+    from clrender.ngprt.random_model import random_baked_model
+    from clrender import methods
+
+    scene = make_scene("bounded", tmp_path / "scene", seed=1, n_train=6, n_test=2, width=24,
+                       height=24)
+    teacher = save_baked(random_baked_model(preset("tiny", variant="sum"), seed=2),
+                         tmp_path / "teacher.npz")
+    asked = []
+
+    def ensure_model(root, data, fingerprint, preset, method, options, **kw):
+        asked.append((method, options))
+        return cache.ModelEntry("teacher-key", teacher, tmp_path, 0.0)
+
+    monkeypatch.setattr(cache, "ensure_model", ensure_model)
+    points = train_curve.measure_curve(tmp_path / "cache", scene, "fp", "tiny", iterations=30,
+                                       progress=False, method="ndrf")
+    assert asked == [("ngprt", {"variant": "separate-v", "L": 2})]
+    assert [p["step"] for p in points] == train_curve.eval_steps(30, 25) == [0, 25, 29]
+    line = evaluate(teacher, scene)["mean"]["psnr"]
+    assert all(p["method"] == "ndrf" and p["teacher_test_psnr"] == line for p in points)
+    (run_dir,) = (tmp_path / "cache" / "curves").glob("*/run")
+    tables = evaluate(bake_run(run_dir, tmp_path / "student.npz"), scene)
+    assert points[-1]["test_psnr"] == pytest.approx(tables["mean"]["psnr"], abs=1e-6)
+    plain = methods.get("ndrf").train(str(scene), tmp_path / "plain", "tiny", iterations=30,
+                                      progress=False, teacher=str(teacher))
     curve, plain = (torch.load(d / "checkpoint.pt", weights_only=True) for d in (run_dir, plain))
     torch.testing.assert_close(curve["model"], plain["model"], rtol=0, atol=0)

@@ -162,7 +162,7 @@ def test_large_image_renders_and_too_large_is_refused():
 
 
 def test_unknown_hit_source_is_refused():
-    with pytest.raises(ValueError, match="hits='gl'"):
+    with pytest.raises(ValueError, match="option 'hits' is 'gl'"):
         Renderer(_model(1), hits="gl")
 
 

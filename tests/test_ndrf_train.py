@@ -207,18 +207,20 @@ def test_train_resume_and_bake(tmp_path, small_run_inputs, monkeypatch):
     assert step == 20 and set(state_a) == {"features.0", "features.1", "conv0.weight",
                                            "conv0.bias", "conv1.weight", "conv1.bias"}
     # An interrupted run resumes from its checkpoint and ends where the whole run ended.
-    save = ndrf_train.save_checkpoint
+    from clrender.runs import RunFolder
 
-    def save_then_stop(path, shader, opt, step):
-        save(path, shader, opt, step)
-        if step == 10:
+    save = RunFolder.save_checkpoint
+
+    def save_then_stop(run, state):
+        save(run, state)
+        if state["step"] == 10:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(ndrf_train, "save_checkpoint", save_then_stop)
+    monkeypatch.setattr(RunFolder, "save_checkpoint", save_then_stop)
     with pytest.raises(KeyboardInterrupt):
         ndrf_train.train(ds, tmp_path / "b", teacher, preset="tiny", progress=False,
                          train_config=tcfg)
-    monkeypatch.setattr(ndrf_train, "save_checkpoint", save)
+    monkeypatch.setattr(RunFolder, "save_checkpoint", save)
     assert _features(tmp_path / "b")[0] == 10
     run_b = ndrf_train.train(ds, tmp_path / "b", teacher, preset="tiny", progress=False,
                              train_config=tcfg)

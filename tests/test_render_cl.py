@@ -10,6 +10,8 @@ strictly fewer marching points in total.
 """
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -22,6 +24,8 @@ from clrender.paths import path_cameras
 
 SIZE = 32
 BACKGROUND = (1.0, 0.5, 0.25)
+CORNER_SPHERES = [("sphere", 0.75 * np.array(c, float), np.full(3, 0.12))
+                  for c in itertools.product((-1, 1), repeat=3)]
 
 
 def _model(variant: str, scene: str, L: int = 2, seed: int = 0):
@@ -114,9 +118,11 @@ def test_step_finer_than_the_coarse_grid_matches_reference(scene):
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_distance_grid_skips_only_empty_space(variant, scene):
-    # Seed 3 puts empty coarse cells (exit level coarser than G) in view, where the paper
-    # reads G; with few of them (seed 2, unbounded) G rightly changes nothing.
-    model, camera = _model(variant, scene, seed=3), _camera(scene)
+    # Eight small spheres in the corners of the box leave its centre empty down to mip
+    # level 3 (cells coarser than G's), more than a coarse cell from any content: rays
+    # across it read G, whose ball reaches past the empty mip cells they are in.
+    config = preset("tiny", variant=variant, scene=scene, L=2, L_C=32, log2_T=11, G_res=16)
+    model, camera = random_baked_model(config, 0, 1.0, shapes=CORNER_SPHERES), _camera(scene)
     with_g = Renderer(model, use_G=True).render(camera, stats=True)
     without = Renderer(model, use_G=False).render(camera, stats=True)
     np.testing.assert_array_equal(with_g["n_occ"], without["n_occ"])

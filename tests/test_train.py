@@ -12,7 +12,11 @@ from clrender.ngprt import torch_ops as ops
 from clrender.ngprt.config import T_STOP, preset
 from clrender.ngprt.model import NGPRT
 
-RNG = np.random.default_rng(7)
+@pytest.fixture
+def rng():
+    """A generator of its own for each test (seed 7): a test's inputs do not depend on which
+    tests ran before it."""
+    return np.random.default_rng(7)
 
 
 def _t(a):
@@ -21,29 +25,29 @@ def _t(a):
 
 # -- torch twins == numpy primitives (bit for bit on CPU, same float32 operations) --------
 
-def test_contract_and_lattice_match_numpy():
-    x = (RNG.normal(size=(20000, 3)) * RNG.choice([0.3, 3.0, 300.0], (20000, 1))).astype(np.float32)
+def test_contract_and_lattice_match_numpy(rng):
+    x = (rng.normal(size=(20000, 3)) * rng.choice([0.3, 3.0, 300.0], (20000, 1))).astype(np.float32)
     assert np.array_equal(ops.contract(_t(x)).numpy(), space.contract(x))
     o = x[:2000]
-    d = RNG.normal(size=(2000, 3)).astype(np.float32)
+    d = rng.normal(size=(2000, 3)).astype(np.float32)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     t0, t1 = np.full(2000, np.float32(0.05)), np.full(2000, np.float32(1000.0))
     table = space.lattice_table(o, d, t0, t1)
     table_t = ops.lattice_table(_t(o), _t(d), _t(t0), _t(t1))
     for a, b in zip(table, table_t):
         assert np.array_equal(a, b.numpy())
-    g = (RNG.uniform(0, 1, 2000) * space.lattice_end(table)).astype(np.float32)
+    g = (rng.uniform(0, 1, 2000) * space.lattice_end(table)).astype(np.float32)
     assert np.array_equal(space.lattice_t(table, g), ops.lattice_t(table_t, _t(g)).numpy())
     for unbounded in (False, True):
         assert np.array_equal(ops.to_grid(_t(x), 2.0, unbounded).numpy(),
                               space.to_grid(x, 2.0, unbounded))
-    u = RNG.uniform(-0.1, 1.1, (5000, 3)).astype(np.float32)
+    u = rng.uniform(-0.1, 1.1, (5000, 3)).astype(np.float32)
     assert np.array_equal(ops.cell_index(_t(u), 64).numpy(), space.cell_index(u, 64))
 
 
-def test_ray_box_matches_numpy():
-    o = (RNG.normal(size=(5000, 3)) * 3).astype(np.float32)
-    d = RNG.normal(size=(5000, 3)).astype(np.float32)
+def test_ray_box_matches_numpy(rng):
+    o = (rng.normal(size=(5000, 3)) * 3).astype(np.float32)
+    d = rng.normal(size=(5000, 3)).astype(np.float32)
     d[:100, 0] = 0.0                                           # axis-parallel rays
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     for a, b in zip(ops.ray_box(_t(o), _t(d)), space.ray_box(o, d)):
@@ -51,26 +55,26 @@ def test_ray_box_matches_numpy():
 
 
 @pytest.mark.parametrize("log2_T", [4, 14, 22])
-def test_hash_matches_numpy(log2_T):
-    i = RNG.integers(-3, 1 << 13, (3, 20000))
+def test_hash_matches_numpy(log2_T, rng):
+    i = rng.integers(-3, 1 << 13, (3, 20000))
     ref = encoding.hash_corner(*i, 1 << log2_T)
     assert np.array_equal(ops.hash_corner(*map(_t, i), 1 << log2_T).numpy(), ref)
 
 
-def test_sh4_matches_numpy():
-    d = RNG.normal(size=(5000, 3)).astype(np.float32)
+def test_sh4_matches_numpy(rng):
+    d = rng.normal(size=(5000, 3)).astype(np.float32)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     np.testing.assert_allclose(ops.sh4(_t(d)).numpy(), encoding.sh4(d), rtol=0, atol=1e-6)
 
 
-def test_fine_lookup_matches_contract():
+def test_fine_lookup_matches_contract(rng):
     """docs/ngprt.md "Fine level l": trilinear over hashed corners of R_l = L_C * 2^(l+1)."""
     cfg = preset("tiny", L=3)
     model = NGPRT(cfg)
     with torch.no_grad():
         model.fine_tables.normal_()
     tables = model.fine_tables.detach().numpy()
-    u = RNG.uniform(0, 1, (3000, 3)).astype(np.float32)
+    u = rng.uniform(0, 1, (3000, 3)).astype(np.float32)
     got = model.fine(_t(u)).detach().numpy()
     for l, R in enumerate(cfg.fine_resolutions):
         p = u * np.float32(R)
@@ -142,11 +146,11 @@ def _lattice_loop(o, d, occ, s, cfg):
 
 
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
-def test_lattice_samples_match_loop(scene):
+def test_lattice_samples_match_loop(scene, rng):
     cfg = preset("tiny", scene=scene)
-    occ = RNG.random((cfg.L_C,) * 3) < 0.3
-    o = (RNG.normal(size=(12, 3)) * 1.5).astype(np.float32)
-    d = RNG.normal(size=(12, 3)).astype(np.float32)
+    occ = rng.random((cfg.L_C,) * 3) < 0.3
+    o = (rng.normal(size=(12, 3)) * 1.5).astype(np.float32)
+    d = rng.normal(size=(12, 3)).astype(np.float32)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     s = float(np.float32(0.7 * cfg.s0))
     ids, k, t, delta, u = ops.lattice_samples(_t(o), _t(d), _t(occ), s, cfg.near, cfg.far,

@@ -41,7 +41,7 @@ class NDRFModel:
 
     config: NDRFConfig
     arrays: dict
-    method = "ndrf"           # the method registry's name (clrender/methods.py)
+    method = "ndrf"           # its entry-point name (clrender.methods, pyproject.toml)
 
     def mesh(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(vertices (V, 3) float32, faces (F, 3) int32, features (V, 8) float32)`` of mesh k."""

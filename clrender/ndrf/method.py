@@ -1,4 +1,4 @@
-"""NDRF plugged into the clrender shell (the hooks of :mod:`clrender.methods`), including
+"""NDRF plugged into the clrender shell (meets :class:`clrender.methods.Method`), including
 its own commands: ``clrender ndrf extract`` (duplex meshes from an NGP-RT teacher) and
 ``clrender ndrf init`` (an untrained model on extracted meshes).
 
@@ -8,32 +8,53 @@ called.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
+from ..methods import Option
 from .baked import FORMAT, load_baked
 from .config import PRESETS as _PRESETS
 from .render import Renderer
 
 PRESETS = tuple(_PRESETS)
+DEFAULT_PRESET = "cpu"
+TRAIN_OPTIONS = {
+    "teacher": Option(str, None, "baked NGP-RT teacher (.npz) to distil", required=True),
+    "thresholds": Option(float, None, "alpha thresholds of the K meshes, increasing "
+                         "(default: the preset's; paper 1e-4 1e-2)", nargs="+"),
+    "kernel_size": Option(int, None, "shader conv kernel side (2: the paper's; 1: an MLP)",
+                          choices=(1, 2)),
+    "distill": Option(bool, True, "first half of training on teacher renderings"),
+}
+TEACHER = "ngprt"
+ABLATIONS = Path(__file__).resolve().parent / "ablations"
+CURVE_TABLE = "ndrf-table3"
+LEGACY_RUNS = False
 
-__all__ = ["FORMAT", "PRESETS", "Renderer", "load_baked", "add_train_arguments",
-           "train_from_args", "bake_run", "check_model_options", "model_spec",
-           "train_for_bench", "add_commands"]
+__all__ = ["FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER", "ABLATIONS",
+           "CURVE_TABLE", "LEGACY_RUNS", "Renderer", "load_baked", "train", "train_steps",
+           "bake_run", "check_model_options", "model_spec", "add_commands"]
 
 
-def add_train_arguments(parser) -> None:
-    """NDRF's options of ``clrender train``."""
-    g = parser.add_argument_group("NDRF (--method ndrf)")
-    g.add_argument("--teacher", default=None, help="baked NGP-RT teacher (.npz) to distil")
+def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
+          iterations: int | None = None, torch_device=None, progress: bool = True,
+          on_step=None, downscale: int = 1, teacher=None, **options):
+    """Train an NDRF run (:func:`clrender.ndrf.train.train`) from the baked NGP-RT
+    ``teacher``; ``on_step(step, bake)`` as :data:`clrender.methods.StepHook`."""
+    from .train import train as train_ndrf
+
+    if teacher is None:
+        raise ValueError("NDRF training needs a teacher: --teacher TEACHER.npz (a baked "
+                         "NGP-RT model), or model option `teacher` in a bench row")
+    return train_ndrf(data, out, teacher=teacher, preset=preset, iterations=iterations,
+                      seed=seed, device=torch_device, progress=progress, on_step=on_step,
+                      downscale=downscale, **options)
 
 
-def train_from_args(args):
-    from .train import train
+def train_steps(preset: str, iterations: int | None = None) -> tuple[int, int]:
+    from .train import TRAIN_PRESETS
 
-    if not args.teacher:
-        raise ValueError("--method ndrf needs --teacher TEACHER.npz (a baked NGP-RT model)")
-    return train(args.data, args.out, teacher=args.teacher, preset=args.preset,
-                 iterations=args.iterations, seed=args.seed, device=args.torch_device,
-                 downscale=args.downscale)
+    tcfg = TRAIN_PRESETS[preset]
+    return (tcfg.iterations if iterations is None else int(iterations)), tcfg.log_every
 
 
 def bake_run(run_dir, out_path):
@@ -43,29 +64,25 @@ def bake_run(run_dir, out_path):
 
 
 def check_model_options(options: dict) -> None:
-    """Raise ValueError unless ``options`` are NDRF model/training options."""
-    from .train import MODEL_OPTIONS
-
-    unknown = sorted(set(options) - set(MODEL_OPTIONS) - {"teacher"})
+    """Raise ValueError unless ``options`` are NDRF model options of a bench row (with
+    ``teacher`` a dict of NGP-RT model options)."""
+    unknown = sorted(set(options) - set(TRAIN_OPTIONS))
     if unknown:
         raise ValueError(f"unknown NDRF model options {unknown}; expected "
-                         f"{sorted(MODEL_OPTIONS)} and teacher")
+                         f"{sorted(TRAIN_OPTIONS)}")
+    for name, value in options.items():
+        if name == "teacher":
+            if not isinstance(value, dict):
+                raise ValueError(f"model option 'teacher' takes a table of NGP-RT model "
+                                 f"options, got {value!r}")
+        else:
+            TRAIN_OPTIONS[name].check(name, value)
 
 
 def model_spec(preset: str, **options) -> dict:
     from .train import model_spec as spec
 
     return spec(preset, **options)
-
-
-def train_for_bench(data, out, preset: str, seed: int = 0, torch_device=None, teacher=None,
-                    downscale: int = 1, **options):
-    from .train import train
-
-    if teacher is None:
-        raise ValueError("an NDRF row needs model option `teacher` (NGP-RT model options)")
-    return train(str(data), str(out), teacher=teacher, preset=preset, seed=seed,
-                 device=torch_device, downscale=downscale, **options)
 
 
 def _cmd_extract(args) -> int:

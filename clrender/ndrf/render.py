@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from ..methods import Option, Stat
 from .hits import HitCaster
 from .raster_cl import Rasteriser
 from .shader_cl import Shader
@@ -28,20 +29,22 @@ class Renderer:
     Args:
         model: a :class:`clrender.ndrf.baked.NDRFModel`, validated by its loader.
         device: OpenCL device spec or :class:`clrender.device.Runtime`.
-        hits: "raster" (the OpenCL rasteriser; hits stay on the device) or "embree" (ray
-            casting on the host, uploaded each frame: the reference).
+        hits: where the first hits come from (:data:`RENDER_OPTIONS`): "raster" (the OpenCL
+            rasteriser; hits stay on the device) or "embree" (ray casting on the host,
+            uploaded each frame: the reference).
         exact: the shader's exact build (held to the numpy reference in tests); default the
             fast one.
     """
 
-    SCALAR_STATS = {"Coverage": "coverage"}
-    RENDER_OPTIONS = {"hits": str}
+    SCALAR_STATS = {"Coverage": Stat("coverage", "{:.3f}", "share of pixels a mesh covers")}
+    RENDER_OPTIONS = {"hits": Option(str, "raster", "first hits on the meshes: the OpenCL "
+                                     "rasteriser (on the device) or Embree ray casting (host)",
+                                     choices=HIT_SOURCES)}
     TIME_NOTE = ("time per frame: the hits (OpenCL rasteriser kernels, or Embree ray casting "
                  "on the host plus the upload) + the two OpenCL conv passes (kernel times)")
 
     def __init__(self, model, device=None, hits: str = "raster", exact: bool = False):
-        if hits not in HIT_SOURCES:
-            raise ValueError(f"hits={hits!r}: expected one of {', '.join(HIT_SOURCES)}")
+        self.RENDER_OPTIONS["hits"].check("hits", hits)
         self.model, self.config, self.hits = model, model.config, hits
         self.shader = Shader(model, device=device, exact=exact)
         self.runtime = self.shader.runtime

@@ -11,8 +11,9 @@ half the training images (``distill=False``: training images only). Adam, learni
 decaying exponentially from 1e-3 to 1e-5 (the paper; the short CPU presets from 1e-2 to
 1e-4).
 
-A run folder holds ``config.json`` (``"method": "ndrf"``, the NDRF, training and
-extraction configs, data and teacher, seed), ``meshes/``, ``distill.npz``,
+A run folder (:class:`clrender.runs.RunFolder`) holds ``config.json`` (``"method":
+"ndrf"``, the NDRF, training and extraction configs, data and teacher, seed),
+``meshes/``, ``distill.npz``,
 ``checkpoint.pt`` (features, conv weights, optimiser state, step) and ``log.jsonl``.
 
 Examples:
@@ -24,8 +25,6 @@ References: NDRF (Wan et al., CVPR 2023) §3.3, §4.1 "Optimization Details"; su
 from __future__ import annotations
 
 import json
-import math
-import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -33,9 +32,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..atomic import atomic_write
-from ..ngprt.train import pick_device
-from .baked import NDRFModel, save_baked
+from ..runs import RunFolder, mse_psnr, pick_device, set_lr
+from .baked import NDRFModel, save_baked, validate
 from .config import NDRFConfig, preset as ndrf_preset
 from .init import initial_model, load_meshes
 from .mesh import extract_preset
@@ -170,11 +168,9 @@ def _meshes(out: Path, reuse: bool, teacher, cfg, ecfg, cameras, progress):
     return meshes
 
 
-def _config_json(ds, data, cfg, tcfg, ecfg, teacher_id, preset, seed, downscale) -> dict:
+def _config_json(ds, data_path, cfg, tcfg, ecfg, teacher_id, preset, seed, downscale) -> dict:
     conf = {"method": "ndrf", "model": cfg.to_dict(), "train": asdict(tcfg),
-            "extract": asdict(ecfg),
-            "data": None if hasattr(data, "images") else str(Path(data).resolve()),
-            "downscale": downscale,
+            "extract": asdict(ecfg), "data": data_path, "downscale": downscale,
             "teacher": teacher_id, "preset": preset, "seed": int(seed),
             "background": [float(v) for v in np.asarray(ds.background).reshape(3)]}
     return json.loads(json.dumps(conf))
@@ -198,7 +194,8 @@ def _bounded_train_set(data, downscale: int):
 
 def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None,
           seed: int = 0, device=None, progress: bool = True,
-          train_config: TrainConfig | None = None, downscale: int = 1, **options) -> Path:
+          train_config: TrainConfig | None = None, downscale: int = 1, on_step=None,
+          **options) -> Path:
     """Train an NDRF model on the dataset ``data`` (folder or loaded train Dataset) from the
     baked NGP-RT ``teacher`` (path or loaded model) into the run folder ``out``.
 
@@ -209,24 +206,26 @@ def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None
         device: torch device; default cuda when present.
         downscale: the dataset's ``images_{downscale}/`` or its images shrunk that many
             times; recorded in ``config.json``.
+        on_step: called as ``on_step(step, bake)`` after every iteration ``step`` (0-based,
+            as ``log.jsonl``; its log line and checkpoint written where due); ``bake()``
+            returns the training state as an in-memory :class:`NDRFModel`
+            (:func:`bake_shader`).
         **options: :data:`MODEL_OPTIONS` (thresholds, kernel_size, distill).
     An existing run with the same config.json is resumed (meshes, distillation views and
     checkpoint reused). Returns the run folder.
     """
-    dev, out = pick_device(device), Path(out)
+    dev = pick_device(device)
     torch.manual_seed(seed)
     ds = _bounded_train_set(data, downscale)
-    out.mkdir(parents=True, exist_ok=True)  # after loading: a bad dataset writes nothing
+    data_path = None if hasattr(data, "images") else str(Path(data).resolve())
     cfg, tcfg, ecfg = configs(preset, iterations, train_config, **options)
     teacher_model, teacher_id = _teacher_info(teacher)
-    conf = _config_json(ds, data, cfg, tcfg, ecfg, teacher_id, preset, seed, downscale)
-    conf_path, ckpt = out / "config.json", out / "checkpoint.pt"
-    resume = conf_path.is_file() and json.loads(conf_path.read_text()) == conf
-    if not resume:
-        for stale in (conf_path, ckpt, out / "meshes" / "report.json"):
-            stale.unlink(missing_ok=True)
-    meshes = _meshes(out, resume, teacher_model, cfg, ecfg, ds.cameras, progress)
-    atomic_write(conf_path, lambda tmp: tmp.write_text(json.dumps(conf, indent=2)))
+    run = RunFolder(out, _config_json(ds, data_path, cfg, tcfg, ecfg, teacher_id, preset, seed,
+                                       downscale))
+    if not run.resumable:
+        run.forget(run.dir / "meshes" / "report.json")
+    meshes = _meshes(run.dir, run.resumable, teacher_model, cfg, ecfg, ds.cameras, progress)
+    run.write_config()
 
     bg = np.asarray(ds.background, np.float32).reshape(3)
     shader = NDRFShader.from_model(initial_model(cfg, meshes, seed, bg)).to(dev)
@@ -234,20 +233,19 @@ def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None
     if tcfg.distill and tcfg.n_distill > 0:
         from .distill import cached_distillation
 
-        cams, images = cached_distillation(out, teacher_model, ds.cameras, tcfg.n_distill,
+        cams, images = cached_distillation(run.dir, teacher_model, ds.cameras, tcfg.n_distill,
                                            seed, bg, json.dumps(teacher_id, sort_keys=True),
                                            progress=progress)
         views["distill"] = ViewSet.build(meshes, cams, images, dev)
     opt = torch.optim.Adam(shader.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas),
                            eps=tcfg.eps)
-    start = 0
-    if resume and ckpt.is_file():
-        state = torch.load(ckpt, map_location=dev, weights_only=True)
-        shader.load_state_dict(state["model"])
-        opt.load_state_dict(state["optimizer"])
-        start = int(state["step"])
-    _loop(shader, opt, views, torch.as_tensor(bg, device=dev), start, tcfg, seed, out, progress)
-    return out
+    state = run.resume(shader, opt, dev)
+    start = 0 if state is None else int(state["step"])
+    hook = None if on_step is None else \
+        (lambda step: on_step(step, lambda: bake_shader(shader, bg)))
+    _loop(shader, opt, views, torch.as_tensor(bg, device=dev), start, tcfg, seed, run, progress,
+          hook)
+    return run.dir
 
 
 def _phase(step: int, tcfg: TrainConfig, views: dict) -> str:
@@ -256,47 +254,34 @@ def _phase(step: int, tcfg: TrainConfig, views: dict) -> str:
     return "train"
 
 
-def _loop(shader, opt, views, bg, start, tcfg, seed, out, progress):
-    from tqdm import tqdm
-
-    t0 = time.time()
-    bar = tqdm(range(start, tcfg.iterations), initial=start, total=tcfg.iterations,
-               disable=not progress, desc="ndrf", dynamic_ncols=True)
-    with open(out / "log.jsonl", "a" if start else "w") as log:
-        for step in bar:
-            # One generator per step: the same views and patches whether resumed or not.
-            rng = np.random.default_rng([seed, step])
-            phase = _phase(step, tcfg, views)
-            vs = views[phase]
-            i = int(rng.integers(len(vs)))
-            ph, pw = (vs.height, vs.width) if tcfg.patch <= 0 else \
-                (min(tcfg.patch, vs.height), min(tcfg.patch, vs.width))
-            y0, x0 = int(rng.integers(vs.height - ph + 1)), int(rng.integers(vs.width - pw + 1))
-            lr = learning_rate(step, tcfg)
-            for g in opt.param_groups:
-                g["lr"] = lr
-            inputs = vs.window(i, y0, x0, ph, pw, shader.config.kernel_size - 1)
-            rgb = shader(*inputs, background=bg)
-            target = vs.images[i, y0:y0 + ph, x0:x0 + pw].float()
-            loss = F.mse_loss(rgb, target)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            mse = float(loss.detach())
-            psnr = -10.0 * math.log10(max(mse, 1e-10))
-            bar.set_postfix(phase=phase, psnr=f"{psnr:.2f}")
-            if step % tcfg.log_every == 0 or step == tcfg.iterations - 1:
-                log.write(json.dumps({"step": step, "phase": phase, "loss": mse, "psnr": psnr,
-                                      "lr": lr, "view": i, "seconds": time.time() - t0}) + "\n")
-                log.flush()
-            if (step + 1) % tcfg.checkpoint_every == 0 or step == tcfg.iterations - 1:
-                save_checkpoint(out / "checkpoint.pt", shader, opt, step + 1)
-
-
-def save_checkpoint(path: Path, shader, opt, step: int) -> None:
-    """Atomic: features per mesh, conv weights, optimiser state and the step count."""
-    state = {"model": shader.state_dict(), "optimizer": opt.state_dict(), "step": int(step)}
-    atomic_write(path, lambda tmp: torch.save(state, tmp))
+def _loop(shader, opt, views, bg, start, tcfg, seed, run, progress, on_step=None):
+    for step in run.steps(start, tcfg.iterations, tcfg.log_every, tcfg.checkpoint_every,
+                          "ndrf", progress):
+        # One generator per step: the same views and patches whether resumed or not.
+        rng = np.random.default_rng([seed, step])
+        phase = _phase(step, tcfg, views)
+        vs = views[phase]
+        i = int(rng.integers(len(vs)))
+        ph, pw = (vs.height, vs.width) if tcfg.patch <= 0 else \
+            (min(tcfg.patch, vs.height), min(tcfg.patch, vs.width))
+        y0, x0 = int(rng.integers(vs.height - ph + 1)), int(rng.integers(vs.width - pw + 1))
+        lr = learning_rate(step, tcfg)
+        set_lr(opt, lr)
+        inputs = vs.window(i, y0, x0, ph, pw, shader.config.kernel_size - 1)
+        rgb = shader(*inputs, background=bg)
+        target = vs.images[i, y0:y0 + ph, x0:x0 + pw].float()
+        loss = F.mse_loss(rgb, target)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        mse = float(loss.detach())
+        psnr = mse_psnr(mse)
+        run.bar.set_postfix(phase=phase, psnr=f"{psnr:.2f}")
+        run.after_step(step, lambda: {"phase": phase, "loss": mse, "psnr": psnr, "lr": lr,
+                                      "view": i},
+                       lambda: {"model": shader.state_dict(), "optimizer": opt.state_dict()})
+        if on_step is not None:
+            on_step(step)
 
 
 def load_run(run_dir, device=None) -> tuple[NDRFShader, dict]:
@@ -319,8 +304,15 @@ def bake_run(run_dir, out_path) -> Path:
     """Bake the checkpoint of ``run_dir`` into an NDRF file at ``out_path`` (atomically;
     conv weights transposed to [dy, dx, in, out] as docs/ndrf.md). Returns the path."""
     shader, conf = load_run(run_dir)
-    model = NDRFModel(shader.config, shader.to_arrays(conf["background"]))
+    model = bake_shader(shader, conf["background"])
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     trained_on = {"data": conf.get("data"), "downscale": conf.get("downscale", 1)}
     return save_baked(model, out_path, trained_on=trained_on)
+
+
+def bake_shader(shader: NDRFShader, background) -> NDRFModel:
+    """The in-memory baked model of a shader (training's or a run's), validated."""
+    model = NDRFModel(shader.config, shader.to_arrays(background))
+    validate(model, "in-memory NDRF model")
+    return model

@@ -45,7 +45,7 @@ class BakedModel:
     config: ModelConfig
     gamma: float
     arrays: dict
-    method = "ngprt"          # the method registry's name (clrender/methods.py)
+    method = "ngprt"          # its entry-point name (clrender.methods, pyproject.toml)
 
     @property
     def step(self) -> float:

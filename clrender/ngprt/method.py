@@ -1,34 +1,78 @@
-"""NGP-RT plugged into the clrender shell (the hooks of :mod:`clrender.methods`).
+"""NGP-RT plugged into the clrender shell (meets :class:`clrender.methods.Method`).
 
 Rendering needs numpy and pyopencl only: training and baking (torch) are imported when
 called.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
+from ..methods import Option, Stat
 from .baked import FORMAT, load_baked
 from .config import PRESETS as _MODEL_PRESETS, VARIANTS
-from .render_cl import Renderer
+from .render_cl import Renderer as _CLRenderer
 
 PRESETS = tuple(_MODEL_PRESETS)
+DEFAULT_PRESET = "cpu"
+TRAIN_OPTIONS = {
+    "variant": Option(str, "separate-v", "feature aggregation (Table 3)", choices=VARIANTS),
+    "L": Option(int, 2, "fine hash levels L", flag="--levels"),
+}
+TEACHER = None
+ABLATIONS = Path(__file__).resolve().parent / "ablations"
+CURVE_TABLE = "table2"
+LEGACY_RUNS = True          # runs written before config.json named the method are NGP-RT's
 
-__all__ = ["FORMAT", "PRESETS", "Renderer", "load_baked", "add_train_arguments",
-           "train_from_args", "bake_run", "check_model_options", "model_spec", "train_for_bench"]
+__all__ = ["FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER", "ABLATIONS",
+           "CURVE_TABLE", "LEGACY_RUNS", "Renderer", "load_baked", "train", "train_steps",
+           "bake_run", "check_model_options", "model_spec", "add_commands"]
 
 
-def add_train_arguments(parser) -> None:
-    """NGP-RT's options of ``clrender train``."""
-    g = parser.add_argument_group("NGP-RT (--method ngprt)")
-    g.add_argument("--variant", default="separate-v", choices=VARIANTS,
-                   help="feature aggregation (Table 3)")
-    g.add_argument("--levels", type=int, default=2, help="fine hash levels L")
+class Renderer(_CLRenderer):
+    """:class:`clrender.ngprt.render_cl.Renderer` with its declared options and statistics."""
+
+    RENDER_OPTIONS = {"use_G": Option(bool, True, "march with the occupancy distance grid G "
+                                      "(Table 4)", flag="--no-G")}
+    SCALAR_STATS = {"Marching": Stat("n_march", "{:.1f}", "marching points per ray"),
+                    "Occupied": Stat("n_occ", "{:.1f}", "occupied samples per ray")}
+    TIME_NOTE = "OpenCL kernel time per frame (ray marching + deferred MLP)"
 
 
-def train_from_args(args):
-    from .train import train
+def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
+          iterations: int | None = None, torch_device=None, progress: bool = True,
+          on_step=None, downscale: int = 1, variant: str = "separate-v", L: int = 2):
+    """Train an NGP-RT run (:func:`clrender.ngprt.train.train`); ``on_step(step, bake)`` as
+    :data:`clrender.methods.StepHook` (``bake()``: the training state baked in memory)."""
+    from .train import train as train_ngprt
 
-    return train(args.data, args.out, preset=args.preset, variant=args.variant, L=args.levels,
-                 iterations=args.iterations, seed=args.seed, device=args.torch_device,
-                 downscale=args.downscale)
+    return train_ngprt(data, out, preset=preset, variant=variant, L=L, iterations=iterations,
+                       seed=seed, device=torch_device, progress=progress, downscale=downscale,
+                       on_step=None if on_step is None else _step_hook(data, on_step, downscale))
+
+
+def _step_hook(data, on_step, downscale: int = 1):
+    """NGP-RT's ``on_step(step, model, occ, gamma)`` as ``on_step(step, bake)``: ``bake()``
+    bakes the training state in memory, culled with the training cameras as ``bake_run``."""
+    from ..data import load_dataset
+    from .bake import bake_state
+    from .baked import validate
+
+    train_set = data if hasattr(data, "images") else load_dataset(data, split="train",
+                                                                  downscale=downscale)
+
+    def bake(model, occ, gamma):
+        baked = bake_state(model, occ.binary, gamma, train_set)
+        validate(baked, "in-memory NGP-RT model")
+        return baked
+
+    return lambda step, model, occ, gamma: on_step(step, lambda: bake(model, occ, gamma))
+
+
+def train_steps(preset: str, iterations: int | None = None) -> tuple[int, int]:
+    from .train import TRAIN_PRESETS
+
+    tcfg = TRAIN_PRESETS[preset]
+    return (tcfg.iterations if iterations is None else int(iterations)), tcfg.log_every
 
 
 def bake_run(run_dir, out_path):
@@ -39,14 +83,13 @@ def bake_run(run_dir, out_path):
 
 def check_model_options(options: dict) -> None:
     """Raise ValueError unless ``options`` are NGP-RT model options (``variant``, ``L``)."""
-    unknown = sorted(set(options) - {"variant", "L"})
+    unknown = sorted(set(options) - set(TRAIN_OPTIONS))
     if unknown:
         raise ValueError(f"unknown NGP-RT model options {unknown}; expected variant, L")
-    if options.get("variant", "separate-v") not in VARIANTS:
-        raise ValueError(f"variant {options.get('variant')!r} is not one of {VARIANTS}")
-    L = options.get("L", 2)
-    if not isinstance(L, int) or isinstance(L, bool) or L < 1:
-        raise ValueError(f"L must be an integer >= 1, got {L!r}")
+    for name, value in options.items():
+        TRAIN_OPTIONS[name].check(name, value)
+    if options.get("L", 2) < 1:
+        raise ValueError(f"L must be an integer >= 1, got {options['L']!r}")
 
 
 def model_spec(preset: str, variant: str = "separate-v", L: int = 2) -> dict:
@@ -60,10 +103,5 @@ def model_spec(preset: str, variant: str = "separate-v", L: int = 2) -> dict:
             "train": asdict(TRAIN_PRESETS[preset])}
 
 
-def train_for_bench(data, out, preset: str, seed: int = 0, torch_device=None, teacher=None,
-                    variant: str = "separate-v", L: int = 2, downscale: int = 1):
-    """Train one benchmark row's model into the run folder ``out``."""
-    from .train import train
-
-    return train(str(data), str(out), preset=preset, variant=variant, L=L, seed=seed,
-                 device=torch_device, downscale=downscale)
+def add_commands(subparsers) -> None:
+    """NGP-RT has no commands of its own."""

@@ -96,17 +96,20 @@ def _weights(config: ModelConfig, rng) -> dict:
     return {n: a.astype(F32) for n, a in out.items()}
 
 
-def random_baked_model(config: ModelConfig, seed: int = 0, gamma: float = 1.0) -> BakedModel:
+def random_baked_model(config: ModelConfig, seed: int = 0, gamma: float = 1.0,
+                       shapes: list | None = None) -> BakedModel:
     """A valid, structured random :class:`BakedModel` of ``config`` (deterministic per seed).
 
     Args:
         config: any variant, bounded or unbounded, L_C >= 16.
         seed: random seed.
         gamma: step scaler of the model.
+        shapes: the surfaces, ``(kind, centre (3,), radii (3,))`` in contracted space with
+            kind "sphere", "ellipsoid" or "box" (half sizes); None: a few at random.
     """
     rng = np.random.default_rng(seed)
     unbounded = config.scene == "unbounded"
-    shapes = _shapes(rng, unbounded)
+    shapes = _shapes(rng, unbounded) if shapes is None else shapes
     # Band half-width: one coarse cell (at least 0.03) so surfaces are closed at any L_C.
     thick = max(2 * config.extent / config.L_C, 0.03)
     occupancy_0 = _occupancy(config, shapes, thick)

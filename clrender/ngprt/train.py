@@ -1,6 +1,7 @@
 """Training NGP-RT (PyTorch, CPU or CUDA).
 
-A run folder holds ``config.json`` (model config, train config, data path),
+A run folder (:class:`clrender.runs.RunFolder`) holds ``config.json`` (``"method":
+"ngprt"``, model config, train config, data path),
 ``checkpoint.pt`` (model, optimizer, training occupancy, gamma, step) and ``log.jsonl``
 (one JSON line per logged step: loss, psnr, gamma, samples per ray, rays, eta, lr).
 
@@ -14,8 +15,6 @@ S2.4 (optimisation); Instant-NGP / nerfacc occupancy grid.
 from __future__ import annotations
 
 import json
-import math
-import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -23,7 +22,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..atomic import atomic_write
+from ..runs import RunFolder, mse_psnr, pick_device, set_lr, training_data
 from . import torch_ops as ops
 from .config import ModelConfig, preset as model_preset
 from .model import NGPRT, render_rays
@@ -90,13 +89,6 @@ TRAIN_PRESETS: dict[str, TrainConfig] = {
                         occ_warmup=32, occ_decay=0.6, occ_fraction=0.5, checkpoint_every=300,
                         log_every=10),
 }
-
-
-def pick_device(device=None) -> torch.device:
-    """``device`` or cuda when present, else cpu."""
-    if device is None:
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(device)
 
 
 class OccupancyGrid:
@@ -216,13 +208,6 @@ def tune_gamma(gamma: float, n_bar: float, tcfg: TrainConfig) -> float:
     return max(tcfg.gamma_min, (1.0 - tcfg.kappa) * gamma)
 
 
-def save_checkpoint(path: Path, model, opt, occ: OccupancyGrid, gamma: float, step: int):
-    """Atomic: written to a temporary file, then moved over ``path``."""
-    state = {"model": model.state_dict(), "optimizer": opt.state_dict(), "occ_ema": occ.ema,
-             "occ_binary": occ.binary, "gamma": float(gamma), "step": int(step)}
-    atomic_write(path, lambda tmp: torch.save(state, tmp))
-
-
 def load_run(run_dir, device=None):
     """The trained model of a run folder.
 
@@ -245,7 +230,7 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
           train_config: TrainConfig | None = None, progress: bool = True,
           on_step=None, downscale: int = 1) -> Path:
     """Train an NGP-RT model on the dataset folder ``data`` (or a loaded Dataset) into the
-    run folder ``out``.
+    run folder ``out`` (:class:`clrender.runs.RunFolder`).
 
     An existing checkpoint in ``out`` with the same config is resumed.
 
@@ -261,82 +246,65 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
     Returns:
         the run folder.
     """
-    dev, out = pick_device(device), Path(out)
+    dev = pick_device(device)
     torch.manual_seed(seed)
-    in_memory = hasattr(data, "images")
-    if not in_memory:
-        from ..data import load_dataset
-    ds = data if in_memory else load_dataset(data, split="train", downscale=downscale)
-    out.mkdir(parents=True, exist_ok=True)  # after loading: a bad dataset writes nothing
+    ds, data_path = training_data(data, downscale)
     cfg = model_preset(preset, variant=variant, L=L, scene=ds.scene)
     tcfg = train_config or TRAIN_PRESETS[preset]
     if iterations is not None:
         tcfg = replace(tcfg, iterations=int(iterations))
-    conf = {"model": cfg.to_dict(), "train": asdict(tcfg),
-            "data": None if in_memory else str(Path(data).resolve()), "downscale": downscale,
-            "preset": preset,
-            "seed": seed, "background": [float(v) for v in ds.background]}
-    conf = json.loads(json.dumps(conf))
+    run = RunFolder(out, {"method": "ngprt", "model": cfg.to_dict(), "train": asdict(tcfg),
+                          "data": data_path, "downscale": downscale,
+                          "preset": preset, "seed": seed,
+                          "background": [float(v) for v in ds.background]})
     model = NGPRT(cfg).to(dev)
     opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas), eps=tcfg.eps)
     occ, gamma, start = OccupancyGrid(cfg, dev), tcfg.gamma_init, 0
-    ckpt = out / "checkpoint.pt"
-    if ckpt.exists() and (out / "config.json").exists() \
-            and json.loads((out / "config.json").read_text()) == conf:
-        state = torch.load(ckpt, map_location=dev, weights_only=True)
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optimizer"])
+    state = run.resume(model, opt, dev)
+    if state is not None:
         occ.ema, occ.binary = state["occ_ema"].to(dev), state["occ_binary"].to(dev)
         gamma, start = float(state["gamma"]), int(state["step"])
-    (out / "config.json").write_text(json.dumps(conf, indent=2))
-    _loop(model, opt, occ, gamma, start, RaySampler(ds, dev, getattr(ds, "alpha", None)), tcfg, out, progress,
-          on_step)
-    return out
+    run.write_config()
+    _loop(model, opt, occ, gamma, start, RaySampler(ds, dev, getattr(ds, "alpha", None)), tcfg,
+          run, progress, on_step)
+    return run.dir
 
 
-def _loop(model, opt, occ, gamma, start, sampler, tcfg, out, progress, on_step=None):
-    from tqdm import tqdm
-
-    n_rays, t0 = min(tcfg.max_rays, 1024), time.time()
-    bar = tqdm(range(start, tcfg.iterations), initial=start, total=tcfg.iterations,
-               disable=not progress, desc="train", dynamic_ncols=True)
-    with open(out / "log.jsonl", "a" if start else "w") as log:
-        for step in bar:
-            if step % tcfg.occ_every == 0:
-                occ.update(model, step, tcfg.occ_warmup, tcfg.occ_fraction, tcfg.occ_decay,
-                           tcfg.occ_threshold)
-            lr, eta = schedule(step, tcfg)
-            for g in opt.param_groups:
-                g["lr"] = lr
-            o, d, target, bg = sampler.sample(n_rays)
-            r = render_rays(model, o, d, occ.binary, gamma, bg)
-            s = float(torch.tensor(gamma * model.cfg.s0, dtype=torch.float32))
-            lo, hi = ops.distortion_intervals(r["k"], r["t"], r["delta"], s,
-                                              model.cfg.scene == "unbounded")
-            dist = ops.distortion_loss(r["weights"], lo, hi, r["ray_ids"], n_rays)
-            colour = F.huber_loss(r["rgb"], target, delta=tcfg.huber_delta)
-            loss = colour + eta * dist.mean()
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            n_samples, hit = len(r["ray_ids"]), int((r["n_occ"] > 0).sum())
-            # Rays that cross only empty space (background) carry no samples at any step
-            # size, so the average of Eq. S3 is taken over the rays that have samples.
-            n_bar = n_samples / max(1, hit)
-            gamma = tune_gamma(gamma, n_bar, tcfg)
-            n_rays = int(min(tcfg.max_rays, max(64, n_rays * tcfg.target_samples / max(1, n_samples))))
-            mse = float(F.mse_loss(r["rgb"].detach(), target))
-            psnr = -10.0 * math.log10(max(mse, 1e-10))
-            bar.set_postfix(loss=f"{float(loss.detach()):.4f}", psnr=f"{psnr:.2f}", gamma=f"{gamma:.3f}",
-                            spr=f"{n_bar:.1f}")
-            if step % tcfg.log_every == 0 or step == tcfg.iterations - 1:
-                log.write(json.dumps({"step": step, "loss": float(loss.detach()), "psnr": psnr,
-                                      "gamma": gamma, "samples_per_ray": n_bar,
-                                      "rays": len(o), "samples": n_samples, "eta": eta,
-                                      "lr": lr, "occupied": float(occ.binary.float().mean()),
-                                      "seconds": time.time() - t0}) + "\n")
-                log.flush()
-            if (step + 1) % tcfg.checkpoint_every == 0 or step == tcfg.iterations - 1:
-                save_checkpoint(out / "checkpoint.pt", model, opt, occ, gamma, step + 1)
-            if on_step is not None:
-                on_step(step, model, occ, gamma)
+def _loop(model, opt, occ, gamma, start, sampler, tcfg, run, progress, on_step=None):
+    n_rays = min(tcfg.max_rays, 1024)
+    for step in run.steps(start, tcfg.iterations, tcfg.log_every, tcfg.checkpoint_every,
+                          "train", progress):
+        if step % tcfg.occ_every == 0:
+            occ.update(model, step, tcfg.occ_warmup, tcfg.occ_fraction, tcfg.occ_decay,
+                       tcfg.occ_threshold)
+        lr, eta = schedule(step, tcfg)
+        set_lr(opt, lr)
+        o, d, target, bg = sampler.sample(n_rays)
+        r = render_rays(model, o, d, occ.binary, gamma, bg)
+        s = float(torch.tensor(gamma * model.cfg.s0, dtype=torch.float32))
+        lo, hi = ops.distortion_intervals(r["k"], r["t"], r["delta"], s,
+                                          model.cfg.scene == "unbounded")
+        dist = ops.distortion_loss(r["weights"], lo, hi, r["ray_ids"], n_rays)
+        colour = F.huber_loss(r["rgb"], target, delta=tcfg.huber_delta)
+        loss = colour + eta * dist.mean()
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        n_samples, hit = len(r["ray_ids"]), int((r["n_occ"] > 0).sum())
+        # Rays that cross only empty space (background) carry no samples at any step
+        # size, so the average of Eq. S3 is taken over the rays that have samples.
+        n_bar = n_samples / max(1, hit)
+        gamma = tune_gamma(gamma, n_bar, tcfg)
+        n_rays_used = len(o)
+        n_rays = int(min(tcfg.max_rays, max(64, n_rays * tcfg.target_samples / max(1, n_samples))))
+        psnr = mse_psnr(float(F.mse_loss(r["rgb"].detach(), target)))
+        run.bar.set_postfix(loss=f"{float(loss.detach()):.4f}", psnr=f"{psnr:.2f}",
+                            gamma=f"{gamma:.3f}", spr=f"{n_bar:.1f}")
+        run.after_step(step, lambda: {
+            "loss": float(loss.detach()), "psnr": psnr, "gamma": gamma,
+            "samples_per_ray": n_bar, "rays": n_rays_used, "samples": n_samples, "eta": eta,
+            "lr": lr, "occupied": float(occ.binary.float().mean())},
+            lambda: {"model": model.state_dict(), "optimizer": opt.state_dict(),
+                     "occ_ema": occ.ema, "occ_binary": occ.binary, "gamma": float(gamma)})
+        if on_step is not None:
+            on_step(step, model, occ, gamma)

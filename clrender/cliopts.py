@@ -1,0 +1,85 @@
+"""Methods' declared options (:class:`clrender.methods.Option`) on the command line: one
+argument group per method, and back from the parsed flags to the chosen method's keyword
+options, refusing the options of other methods.
+
+Examples:
+    >>> add_groups(train_parser, "train")          # every method's TRAIN_OPTIONS
+    >>> options = chosen(args, "train", "ndrf")    # {"teacher": "model.npz"} as given
+"""
+from __future__ import annotations
+
+import argparse
+
+from . import methods
+
+KINDS = {"train": "training", "render": "render"}
+
+
+def _declared(plugin, kind: str) -> dict:
+    return plugin.TRAIN_OPTIONS if kind == "train" else plugin.Renderer.RENDER_OPTIONS
+
+
+def _argument(name: str, opt: methods.Option) -> dict:
+    """argparse keywords of an option; an absent flag parses as None (not given)."""
+    if opt.type is bool:
+        state = "on by default; this flag turns it off" if opt.default is True else \
+            "off by default"
+        return {"action": "store_const", "const": opt.default is not True, "default": None,
+                "help": f"{opt.help} ({state})"}
+    default = "" if opt.default is None else f" (default: {opt.default})"
+    return {"type": opt.type, "choices": opt.choices, "nargs": opt.nargs, "default": None,
+            "metavar": None if opt.choices else name.upper(), "help": opt.help + default}
+
+
+def add_groups(parser: argparse.ArgumentParser, kind: str) -> None:
+    """Add every method's ``kind`` options ("train": ``TRAIN_OPTIONS``, "render": the
+    Renderer's ``RENDER_OPTIONS``) to ``parser``, one argument group per method. Methods
+    declaring the same flag share it when its argparse form is the same; otherwise the
+    later method's flag is prefixed with its name (``--<method>-<option>``)."""
+    flags: dict[str, dict] = {}          # flag -> {method: option name}
+    forms: dict[str, dict] = {}
+    for name in methods.names():
+        group = None
+        for opt_name, opt in _declared(methods.get(name), kind).items():
+            flag, form = opt.cli_flag(opt_name), _argument(opt_name, opt)
+            if flag in forms and _bare(form) != _bare(forms[flag]):
+                flag = f"--{name}-{opt_name.replace('_', '-')}"
+            if flag not in forms:
+                group = group or parser.add_argument_group(
+                    f"{name} {KINDS[kind]} options", f"for --method {name}" if kind == "train"
+                    else f"for models of method {name}")
+                group.add_argument(flag, dest=_dest(kind, flag), **form)
+                forms[flag] = form
+            flags.setdefault(flag, {})[name] = opt_name
+    parser.set_defaults(**{f"_{kind}_flags": flags})
+
+
+def _bare(form: dict) -> dict:
+    return {k: v for k, v in form.items() if k != "help"}
+
+
+def _dest(kind: str, flag: str) -> str:
+    return f"_{kind}:{flag}"
+
+
+def chosen(args: argparse.Namespace, kind: str, method: str) -> dict:
+    """The ``kind`` options given on the command line for ``method``, by keyword.
+
+    Raises:
+        ValueError: a flag of another method was given, or a required one is missing.
+    """
+    flags = getattr(args, f"_{kind}_flags")
+    given = {flag: getattr(args, _dest(kind, flag)) for flag in flags
+             if getattr(args, _dest(kind, flag)) is not None}
+    foreign = sorted(f for f in given if method not in flags[f])
+    if foreign:
+        owners = "; ".join(f"{f} is for {', '.join(flags[f])}" for f in foreign)
+        what = f"--method {method}" if kind == "train" else f"a model of method {method}"
+        raise ValueError(f"{', '.join(foreign)} do{'es' if len(foreign) == 1 else ''} not "
+                         f"apply to {what} ({owners})")
+    declared = _declared(methods.get(method), kind)
+    missing = [opt.cli_flag(n) for n, opt in declared.items()
+               if opt.required and opt.cli_flag(n) not in given]
+    if missing:
+        raise ValueError(f"--method {method} needs {', '.join(missing)}")
+    return {flags[f][method]: v for f, v in given.items()}
