@@ -114,8 +114,8 @@ def test_render_options_are_checked_per_method(models):
         clrender.Renderer(models["ndrf"], use_G=False)
     with pytest.raises(ValueError, match=r"option 'use_G' takes bool, got 0"):
         clrender.Renderer(models["ngprt"], use_G=0)
-    with pytest.raises(ValueError, match=r"option 'hits' is 'raster', expected one of"):
-        clrender.Renderer(models["ndrf"], hits="raster")
+    with pytest.raises(ValueError, match=r"option 'hits' is 'gl', expected one of"):
+        clrender.Renderer(models["ndrf"], hits="gl")
     cam = path_cameras("bounded", "orbit", 4, 12, 12)[0]
     off = clrender.Renderer(models["ngprt"], use_G=False).render(cam, stats=True)
     on = clrender.Renderer(models["ngprt"]).render(cam, stats=True)       # use_G: True

@@ -125,15 +125,15 @@ def save_baked(model: ToyModel, path) -> Path:
 
 def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
           iterations: int | None = None, torch_device=None, progress: bool = True,
-          on_step=None, radius: float = 0.6) -> Path:
-    from clrender.data import load_dataset
+          on_step=None, downscale: int = 1, radius: float = 0.6) -> Path:
+    from clrender.runs import training_data
 
-    ds = data if hasattr(data, "images") else load_dataset(data, split="train")
+    ds, data_path = training_data(data, downscale)
     n_iter, _ = train_steps(preset, iterations)
     config = ToyConfig(ds.scene, float(radius))
     run = RunFolder(out, {"method": "toy", "model": {"scene": ds.scene, "radius": radius},
                           "iterations": n_iter, "preset": preset, "seed": seed,
-                          "data": None if hasattr(data, "images") else str(Path(data).resolve())})
+                          "data": data_path, "downscale": downscale})
     state = run.resume_state(pick_device(torch_device))
     colour = torch.full((3,), 0.5) if state is None else state["colour"]
     start = 0 if state is None else int(state["step"])
