@@ -154,6 +154,8 @@ class Renderer:
             same samples and differs in exp-based values by a few ulps.
         rays, deferred_vec: lanes per work-item of the march and the deferred MLP
             (default :func:`lane_width` of the device).
+        kernel_dir: build the kernels from this folder instead of the installed
+            ``kernels/`` (``bench.ngprt_kernels --baseline``: another version of them).
     """
 
     SCALAR_STATS = {"Marching": "n_march", "Occupied": "n_occ"}
@@ -161,7 +163,8 @@ class Renderer:
     TIME_NOTE = "OpenCL kernel time per frame (ray marching + deferred MLP)"
 
     def __init__(self, model, device=None, use_G: bool = True, exact: bool = False,
-                 rays: int | None = None, deferred_vec: int | None = None):
+                 rays: int | None = None, deferred_vec: int | None = None,
+                 kernel_dir: str | None = None):
         self.model, self.config, self.use_G = model, model.config, bool(use_G)
         self.exact = bool(exact)
         self.runtime = rt = get_runtime(device)
@@ -169,9 +172,10 @@ class Renderer:
         self.deferred_vec = deferred_vec or lane_width(rt.device)
         march_defs, deferred_defs = kernel_defines(self.config, self.use_G, self.deferred_vec,
                                                    self.rays)
-        self._march = rt.program("ngprt_march.cl", march_defs, exact).kernel("ngprt_march")
-        self._deferred = rt.program("ngprt_deferred.cl", deferred_defs,
-                                    exact).kernel("ngprt_deferred")
+        self._march = rt.program("ngprt_march.cl", march_defs, exact,
+                                 kernel_dir).kernel("ngprt_march")
+        self._deferred = rt.program("ngprt_deferred.cl", deferred_defs, exact,
+                                    kernel_dir).kernel("ngprt_deferred")
         self.step = F32(model.step)
         self._local = {}
         self._upload()
