@@ -32,7 +32,7 @@ inline vfloat v_next_t(const v_rays *r)
 {
     const vfloat g_next = v_lattice_g(r, r->k + 1);
 #if UNBOUNDED
-    return select((vfloat)(r->far), v_lattice_t(&r->lt, v_min(g_next, r->g_end)),
+    return select((vfloat)(r->far), v_lattice_t(r->lt, v_min(g_next, r->g_end)),
                   VMASK(g_next < r->g_end));
 #else
     return g_next;
@@ -104,7 +104,9 @@ __kernel void ngprt_march(__global const float *cam, const int width, const int 
     if (px0 >= width || py >= height) return;
     ngp_model m = {exit_code, G, block_index, blocks, n_blocks, tables, fusion};
     ngp_inv_sigmoids(fusion, m.inv_sig);
-    v_rays r;
+    v_lattice lattice;
+    float8 acc[RAYS];
+    v_rays r = {.lt = &lattice, .acc = acc};
     vint active = v_rays_start(&r, cam, px0 + LANE_IDS, py, width, s, near, far);
     active = active & v_marching(&r);
     while (any(active)) {

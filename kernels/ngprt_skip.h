@@ -228,12 +228,12 @@ inline vint v_skip(const ngp_model *m, const v_rays *r, const v_march_point *p, 
     const vint cube = VMASK(g > 0) & VMASK(half_side > 0.0f);
     const vfloat lim = v_k_limit(r);
     vint k = r->k, walking = empty;
-    vfloat tk = v_lattice_t(&r->lt, v_lattice_g(r, k));
+    vfloat tk = v_lattice_t(r->lt, v_lattice_g(r, k));
     while (any(walking)) {
         const vfloat T = v_boxes_exit(r, tk, walking, cell, res, u, cube, half_side);
-        const vint jump = v_ceil_i(v_min(v_lattice_s(&r->lt, T) / r->s - K_BACKOFF, lim));
+        const vint jump = v_ceil_i(v_min(v_lattice_s(r->lt, T) / r->s - K_BACKOFF, lim));
         k = select(k, max(k + 1, jump), walking);
-        tk = v_lattice_t(&r->lt, v_lattice_g(r, k));
+        tk = v_lattice_t(r->lt, v_lattice_g(r, k));
         const vpoint uk = v_point_u(r->o, r->d, tk);
         const vfloat dx = uk.x - u.x, dy = uk.y - u.y, dz = uk.z - u.z;
         const vint stay = v_same_cell(v_cell(uk, res), cell)

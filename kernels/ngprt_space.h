@@ -14,16 +14,18 @@
 #include "ngprt_lattice.h"
 
 /* The RAYS rays of a work-item: their fixed geometry, then the march state of each lane
- * (the twin of render_ref._Rays). */
+ * (the twin of render_ref._Rays). The lattice tables and the accumulators are arrays the
+ * struct points to, held apart: acc is indexed by lane at run time, and an array indexed
+ * so inside the struct would keep every field in memory instead of registers. */
 typedef struct {
     float3 o;              /* the camera's origin, every lane */
     vpoint d;              /* unit directions */
     float s, far;          /* the step (lattice units); far, where unbounded rays end */
     vfloat g_end;          /* lattice distance of the ray's end: t_end, unbounded S(far) */
-    v_lattice lt;          /* unbounded: each lane's lattice table */
+    v_lattice *lt;         /* unbounded: each lane's lattice table */
     vint k;                /* the current lattice index */
     vfloat T, opacity, depth_acc;
-    float8 acc[RAYS];      /* composited features; .s0 (w * sigma logit) is not output */
+    float8 *acc;           /* [RAYS] composited features; .s0 (w * sigma logit) unused */
     vint n_march, n_occ;   /* marching points, occupied samples */
 } v_rays;
 
@@ -107,7 +109,7 @@ inline v_march_point v_point_at(const v_rays *r, vint k)
 {
     v_march_point p;
 #if UNBOUNDED
-    p.t = v_lattice_t(&r->lt, v_lattice_g(r, k));
+    p.t = v_lattice_t(r->lt, v_lattice_g(r, k));
 #else
     p.t = v_lattice_g(r, k);
 #endif
@@ -121,7 +123,8 @@ inline v_march_point v_point_at(const v_rays *r, vint k)
  * inf/NaN from an axis-parallel ray outside it, nor px past the image), with g_end the
  * end of the lattice distance and k the first lattice index: bounded t_end and
  * ceil(t_start / s) (0 where missed: ceil() of inf never reaches an int); unbounded
- * S(far) and 0, each lane's lattice built into lt. */
+ * S(far) and 0, each lane's lattice built into *r->lt (r->lt and r->acc point to the
+ * work-item's arrays). */
 inline vint v_rays_start(v_rays *r, __global const float *cam, vint px, int py, int width,
                          float s, float near, float far)
 {
@@ -134,8 +137,8 @@ inline vint v_rays_start(v_rays *r, __global const float *cam, vint px, int py, 
     r->n_march = r->n_occ = (vint)(0);
     FOR_LANES(j) r->acc[j] = (float8)(0.0f);
 #if UNBOUNDED
-    v_lattice_build(r->o, r->d, near, far, &r->lt);
-    r->g_end = r->lt.cum[LATTICE_BREAKS - 1];
+    v_lattice_build(r->o, r->d, near, far, r->lt);
+    r->g_end = r->lt->cum[LATTICE_BREAKS - 1];
     r->k = (vint)(0);
     return VMASK(px < width);
 #else
