@@ -44,15 +44,16 @@ inline vfloat v_next_t(const v_rays *r)
  * at once (two vector exps). */
 inline void v_composite(const ngp_model *m, v_rays *r, const v_march_point *p, vint sample)
 {
-    v_corners c;
-    v_coarse_corners(m, p, sample, &c);
-    v_fine_corners(p, &c);
+    vint idx[N_CORNERS];
+    vfloat wt[N_CORNERS];
+    v_coarse_corners(m, p, sample, idx, wt);
+    v_fine_corners(p, idx, wt);
     float8 f[RAYS];
     float logit[RAYS];
     FOR_LANES(j) {
         logit[j] = 0.0f;
         if (LANE_I(sample, j)) {
-            f[j] = ngp_lane_features(m, &c, j);
+            f[j] = ngp_lane_features(j, idx, wt, m->blocks, m->tables, m->fusion, m->inv_sig);
             logit[j] = f[j].s0;
         }
     }
