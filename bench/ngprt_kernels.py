@@ -156,7 +156,7 @@ def _stage_cells(r: dict) -> list[str]:
 def bounds_note(meta: dict) -> str:
     """The sentence on the bounds and the rates measured in this run."""
     lim = meta["limits"]
-    rates = ", ".join(f"{name} {rate / 1e9:.2f} G/s ({lim['table_bytes'][name] / 2**20:.1f} MiB)"
+    rates = ", ".join(f"{name} {rate / 1e9:.2f} G/s ({lim['table_bytes'][name] / 2**20:.2f} MiB)"
                       for name, rate in lim["gathers_per_s"].items())
     note = (f"Bounds (bench/limits.py): each stage's counters at the rates measured in this "
             f"run (random 32-byte gathers from tables of the model's sizes: {rates}; "
