@@ -1,20 +1,32 @@
-"""Kernel timings of the OpenCL NGP-RT renderer on a random structured baked model.
+"""Kernel timings of the OpenCL NGP-RT renderer: a random structured model, or a trained one.
 
     python -m bench.ngprt_kernels                       # 400x400, `cpu` preset, 5 repeats
     python -m bench.ngprt_kernels --size 800            # the 800x800 frame
     python -m bench.ngprt_kernels --size 200 --repeats 3 --preset tiny --out results/
     python -m bench.ngprt_kernels --L-C 256             # finer grids: G has more to skip
     python -m bench.ngprt_kernels --exact               # the exact build (tests' build)
+    python -m bench.ngprt_kernels --baseline /tmp/old_kernels --variant separate-v
+    python -m bench.ngprt_kernels --model M.npz --data DIR   # trained: test cameras, 3 sizes
 
-For every aggregation variant, with and without the occupancy distance grid G, renders
-one orbit view and reports the march and deferred-MLP kernel times (OpenCL profiling
-events; median and p10-p90 over the repeats, after one warm-up render), the marching and
-occupied points per ray, each stage's bound and the ratio time / bound
-(:mod:`bench.limits`: the stage's own counters at the gather and FLOP rates measured on
-the device in the same run), and the speed-ups: each variant against ``mlp``, G on
-against G off, and OpenCL against the numpy reference. The reference is timed once per
-variant (with G) on a smaller frame (``--ref-size``) and scaled by the pixel count; the
-table says so. Writes ``<out>/ngprt_kernels.{json,md}``. Never asserts.
+Random model: for every aggregation variant (``--variant``: some), with and without the
+occupancy distance grid G, renders one orbit view and reports the march and deferred-MLP
+kernel times (OpenCL profiling events; median and p10-p90 over the repeats, after one
+warm-up render), the marching and occupied points per ray, each stage's bound and the
+ratio time / bound (:mod:`bench.limits`: the stage's own counters at the gather and FLOP
+rates measured on the device in the same run), and the speed-ups: each variant against
+``mlp``, G on against G off, and OpenCL against the numpy reference. The reference is
+timed once per variant (with G) on a smaller frame (``--ref-size``) and scaled by the
+pixel count; the table says so. Writes ``<out>/ngprt_kernels.{json,md}``.
+
+Trained model (``--model M.npz --data DIR``): its one variant, with G, on the first
+``--views`` test cameras of DIR at the test size and at ``--sizes`` (default 800x800 and
+1920x1080; each test camera through ``Camera.scaled_to``, the pixel aspect kept:
+:func:`at_size`), the same columns per frame size. Writes
+``<out>/ngprt_kernels_<model stem>.{json,md}``.
+
+``--baseline DIR`` renders every row with the kernel sources of DIR too (e.g. a copy of an
+older ``kernels/``), interleaved with the installed ones, and adds their time, the ratio
+and whether images and counters agree. Never asserts.
 """
 from __future__ import annotations
 
@@ -22,12 +34,17 @@ import argparse
 import datetime
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
+
+import numpy as np
 
 from bench.limits import deferred_bound, march_bound, measure_limits
 from clrender.atomic import write_atomic
 from clrender.device import get_runtime
+from clrender.data import load_dataset
 from clrender.metrics import summarize_ms
+from clrender.ngprt.baked import load_baked
 from clrender.ngprt.config import VARIANTS, preset
 from clrender.ngprt.random_model import random_baked_model
 from clrender.ngprt.render_cl import Renderer
@@ -39,30 +56,65 @@ def _camera(scene: str, size: int):
     return path_cameras(scene, "orbit", 8, size, size)[1]
 
 
-def measure(model, camera, use_G: bool, repeats: int, device=None, exact: bool = False,
-            limits: dict | None = None) -> dict:
+def measure(model, cameras, use_G: bool, repeats: int, device=None, exact: bool = False,
+            limits: dict | None = None, baseline=None, background=(1.0, 1.0, 1.0)) -> dict:
     """Kernel times (ms), points per ray and (given ``limits``) each stage's bound of one
-    model/camera, G on or off."""
-    renderer = Renderer(model, device=device, use_G=use_G, exact=exact)
-    stats = renderer.render(camera, stats=True)  # warm-up: first-touch of buffers, caches
-    march, deferred = [], []
-    for _ in range(repeats):
-        out = renderer.render(camera)
-        march.append(out["ms_march"])
-        deferred.append(out["ms_deferred"])
-    total = [a + b for a, b in zip(march, deferred)]
-    row = {"march": summarize_ms(march), "deferred": summarize_ms(deferred),
-           "total": summarize_ms(total), "marching": float(stats["n_march"].mean()),
-           "occupied": float(stats["n_occ"].mean()),
-           "covered": float((stats["opacity"] > 0).mean()), "rgb": out["rgb"]}
+    model over ``cameras`` (one frame each, after a warm-up render that reads the
+    counters), G on or off; times are summarised over every camera and repeat, counters
+    and bounds are per frame, means over the cameras.
+
+    With ``baseline`` (a folder of kernel sources, e.g. an older ``kernels/``) the same
+    renders run with those kernels too, interleaved repeat by repeat (the order swapped
+    every repeat), and the row gets their times, ``vs_baseline`` (the median over repeats
+    of baseline total / this total, each pair rendered back to back, so a change in the
+    load of shared cores moves both; >1 = these kernels faster) with its p10-p90, the
+    largest rgb difference and whether every pixel's counters agree.
+    """
+    renderers = {"now": Renderer(model, device=device, use_G=use_G, exact=exact)}
+    if baseline is not None:
+        renderers["baseline"] = Renderer(model, device=device, use_G=use_G, exact=exact,
+                                         kernel_dir=str(baseline))
+    times = {name: {"march": [], "deferred": []} for name in renderers}
+    counts, pairs, rgb_diff, same = [], [], 0.0, True
+    for camera in cameras:
+        first = {name: r.render(camera, background, stats=True) for name, r in renderers.items()}
+        st = first["now"]
+        counts.append((st["n_march"].mean(), st["n_occ"].mean(), (st["opacity"] > 0).mean()))
+        if baseline is not None:
+            old = first["baseline"]
+            rgb_diff = max(rgb_diff, float(np.abs(st["rgb"] - old["rgb"]).max()))
+            same = same and all(np.array_equal(st[k], old[k]) for k in ("n_march", "n_occ"))
+        for i in range(repeats):
+            for name in (list(renderers) if i % 2 == 0 else list(renderers)[::-1]):
+                out = renderers[name].render(camera, background)
+                times[name]["march"].append(out["ms_march"])
+                times[name]["deferred"].append(out["ms_deferred"])
+            if baseline is not None:
+                pairs.append(sum(times["baseline"][k][-1] for k in ("march", "deferred"))
+                             / sum(times["now"][k][-1] for k in ("march", "deferred")))
+    row = _time_summary(times["now"])
+    row.update(marching=float(np.mean([c[0] for c in counts])),
+               occupied=float(np.mean([c[1] for c in counts])),
+               covered=float(np.mean([c[2] for c in counts])))
+    if baseline is not None:
+        row["baseline"] = _time_summary(times["baseline"])
+        row["vs_baseline"] = float(np.median(pairs))
+        row["vs_baseline_p10_p90"] = [float(np.percentile(pairs, q)) for q in (10, 90)]
+        row["baseline_rgb_diff"], row["baseline_same_counts"] = rgb_diff, same
     if limits is not None:
-        n = camera.width * camera.height
+        n = cameras[0].width * cameras[0].height
         row["bound"] = {
             "march": march_bound(model.config, row["marching"] * n, row["occupied"] * n, limits),
             "deferred": deferred_bound(row["covered"] * n, limits)}
         for stage in ("march", "deferred"):
             row["bound"][stage]["ratio"] = row[stage]["median"] / row["bound"][stage]["ms"]
     return row
+
+
+def _time_summary(times: dict) -> dict:
+    total = [a + b for a, b in zip(times["march"], times["deferred"])]
+    return {"march": summarize_ms(times["march"]), "deferred": summarize_ms(times["deferred"]),
+            "total": summarize_ms(total)}
 
 
 def time_reference(model, camera, ref_size: int, size: int) -> dict:
@@ -83,60 +135,98 @@ def _fmt_bound(r: dict, stage: str) -> str:
     return f"{b['ms']:.1f} / {b['ratio']:.2f}x"
 
 
-def markdown(rows: list[dict], meta: dict) -> str:
-    head = ["variant", "G", "march ms (p10-p90)", "march bound ms / ratio",
-            "deferred ms (p10-p90)", "deferred bound ms / ratio", "total ms",
-            "marching/ray", "occupied/ray", "covered", "vs mlp", "G on vs off", "CL vs ref"]
+STAGE_HEAD = ["march ms (p10-p90)", "march bound ms / ratio", "deferred ms (p10-p90)",
+              "deferred bound ms / ratio", "total ms", "marching/ray", "occupied/ray", "covered"]
+BASELINE_HEAD = ["baseline total ms", "vs baseline (p10-p90)",
+                 "baseline max rgb diff / same counts"]
+
+
+def _stage_cells(r: dict) -> list[str]:
+    cells = [_fmt_t(r["march"]), _fmt_bound(r, "march"), _fmt_t(r["deferred"]),
+             _fmt_bound(r, "deferred"), f"{r['total']['median']:.1f}", f"{r['marching']:.2f}",
+             f"{r['occupied']:.2f}", f"{r['covered']:.2f}"]
+    if "baseline" in r:
+        lo, hi = r["vs_baseline_p10_p90"]
+        cells += [f"{r['baseline']['total']['median']:.1f}",
+                  f"{r['vs_baseline']:.2f}x ({lo:.2f}-{hi:.2f})",
+                  f"{r['baseline_rgb_diff']:.1e} / {'yes' if r['baseline_same_counts'] else 'NO'}"]
+    return cells
+
+
+def bounds_note(meta: dict) -> str:
+    """The sentence on the bounds and the rates measured in this run."""
     lim = meta["limits"]
-    rates = ", ".join(f"{name} {rate / 1e9:.2f} G/s ({lim['table_bytes'][name] / 2**20:.1f} MiB)"
+    rates = ", ".join(f"{name} {rate / 1e9:.2f} G/s ({lim['table_bytes'][name] / 2**20:.2f} MiB)"
                       for name, rate in lim["gathers_per_s"].items())
+    note = (f"Bounds (bench/limits.py): each stage's counters at the rates measured in this "
+            f"run (random 32-byte gathers from tables of the model's sizes: {rates}; "
+            f"{lim['flops_per_s'] / 1e9:.0f} GFLOP/s), gathers and FLOPs not overlapped; "
+            f"ratio = time / bound.")
+    if meta.get("baseline"):
+        note += (f" Baseline: the kernels of `{meta['baseline']}`, rendered interleaved with "
+                 f"these in the same run, the order swapped every repeat; vs baseline = the "
+                 f"median (p10-p90) over repeats of its total / this total, each pair "
+                 f"rendered back to back (>1: these kernels are faster).")
+    return note
+
+
+def markdown(rows: list[dict], meta: dict) -> str:
+    head = ["variant", "G"] + STAGE_HEAD + ["vs mlp", "G on vs off", "CL vs ref"]
+    head += BASELINE_HEAD if meta.get("baseline") else []
     lines = ["## NGP-RT OpenCL kernels", "",
              f"{meta['device']}; `{meta['preset']}` preset ({meta['config']}), {meta['scene']} "
              f"random structured model, {meta['size']}x{meta['size']} orbit view, "
-             f"{meta['build']} build, {meta['repeats']} repeats after a warm-up. Bounds "
-             f"(bench/limits.py): each stage's counters at the rates measured in this run "
-             f"(random 32-byte gathers from tables of the model's sizes: {rates}; "
-             f"{lim['flops_per_s'] / 1e9:.0f} GFLOP/s), gathers and FLOPs not overlapped "
-             f"(the separate-v model's tables; other variants differ slightly); ratio = "
-             f"time / bound. Speed-ups: time of the other / this row's time, >1 = this row "
-             f"is faster. The numpy reference was timed once per variant (with G) on a "
-             f"{meta['ref_size']}^2 frame and scaled by pixel count.", "",
+             f"{meta['build']} build, {meta['repeats']} repeats after a warm-up. "
+             f"{bounds_note(meta)} The bounds use the separate-v model's tables (other "
+             f"variants differ slightly). Speed-ups: time of the other / this row's time, "
+             f">1 = this row is faster. The numpy reference was timed once per variant (with "
+             f"G) on a {meta['ref_size']}^2 frame and scaled by pixel count.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        lines.append("| " + " | ".join([
-            r["variant"], "on" if r["use_G"] else "off", _fmt_t(r["march"]),
-            _fmt_bound(r, "march"), _fmt_t(r["deferred"]), _fmt_bound(r, "deferred"),
-            f"{r['total']['median']:.1f}", f"{r['marching']:.2f}", f"{r['occupied']:.2f}",
-            f"{r['covered']:.2f}", f"{r['vs_mlp']:.2f}x", f"{r['G_speedup']:.2f}x"
-            if r["use_G"] else "", f"{r['vs_ref']:.0f}x" if r.get("vs_ref") else ""]) + " |")
+        cells = [r["variant"], "on" if r["use_G"] else "off"] + _stage_cells(r)[:8] + [
+            f"{r['vs_mlp']:.2f}x" if "vs_mlp" in r else "",
+            f"{r['G_speedup']:.2f}x" if r["use_G"] else "",
+            f"{r['vs_ref']:.0f}x" if r.get("vs_ref") else ""] + _stage_cells(r)[8:]
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _print_row(label: str, m: dict) -> None:
+    b = m["bound"]
+    extra = (f"  vs baseline {m['vs_baseline']:.2f}x (rgb diff {m['baseline_rgb_diff']:.1e}, "
+             f"same counts {m['baseline_same_counts']})" if "baseline" in m else "")
+    print(f"{label} march {m['march']['median']:7.1f} ms (bound {b['march']['ms']:.1f}, "
+          f"{b['march']['ratio']:.2f}x)  deferred {m['deferred']['median']:6.1f} ms (bound "
+          f"{b['deferred']['ms']:.1f}, {b['deferred']['ratio']:.2f}x)  march/ray "
+          f"{m['marching']:.2f}  occ/ray {m['occupied']:.2f}{extra}", flush=True)
+
+
+def _write(out: Path, name: str, text: str, meta: dict, rows: list[dict]) -> None:
+    write_atomic(out / f"{name}.md", text)
+    write_atomic(out / f"{name}.json", json.dumps({"meta": meta, "rows": rows}, indent=2))
+    print(text)
 
 
 def run(size: int, repeats: int, preset_name: str, scene: str, ref_size: int, out: Path,
         device=None, seed: int = 0, gamma: float = 1.0, L_C: int | None = None,
-        exact: bool = False) -> list[dict]:
+        exact: bool = False, variants=VARIANTS, baseline=None) -> list[dict]:
     rows, refs = [], {}
     camera = _camera(scene, size)
     grid = {} if L_C is None else {"L_C": L_C, "G_res": L_C // 2}   # G at L_C / 2 as in S2.5
     limits = measure_limits(random_baked_model(
         preset(preset_name, variant="separate-v", scene=scene, **grid), seed, gamma), device)
-    for variant in VARIANTS:
+    for variant in variants:
         config = preset(preset_name, variant=variant, scene=scene, **grid)
         model = random_baked_model(config, seed, gamma)
         for use_G in (True, False):
-            m = measure(model, camera, use_G, repeats, device, exact, limits)
-            m.pop("rgb")
+            m = measure(model, [camera], use_G, repeats, device, exact, limits, baseline)
             rows.append({"variant": variant, "use_G": use_G, **m})
-            b = m["bound"]
-            print(f"{variant:13s} G={'on ' if use_G else 'off'} march {m['march']['median']:7.1f}"
-                  f" ms (bound {b['march']['ms']:.1f}, {b['march']['ratio']:.2f}x)  deferred "
-                  f"{m['deferred']['median']:6.1f} ms (bound {b['deferred']['ms']:.1f}, "
-                  f"{b['deferred']['ratio']:.2f}x)  march/ray {m['marching']:.2f}  "
-                  f"occ/ray {m['occupied']:.2f}", flush=True)
+            _print_row(f"{variant:13s} G={'on ' if use_G else 'off'}", m)
         refs[variant] = time_reference(model, camera, ref_size, size)
     mlp = {r["use_G"]: r["total"]["median"] for r in rows if r["variant"] == "mlp"}
     for r in rows:
-        r["vs_mlp"] = mlp[r["use_G"]] / r["total"]["median"]
+        if mlp:
+            r["vs_mlp"] = mlp[r["use_G"]] / r["total"]["median"]
         off = next(x for x in rows if x["variant"] == r["variant"] and not x["use_G"])
         r["G_speedup"] = off["total"]["median"] / r["total"]["median"]
         if r["use_G"]:
@@ -144,14 +234,84 @@ def run(size: int, repeats: int, preset_name: str, scene: str, ref_size: int, ou
             r["vs_ref"] = refs[r["variant"]]["ms_scaled"] / r["total"]["median"]
     meta = {"device": get_runtime(device).name, "preset": preset_name, "scene": scene,
             "size": size, "repeats": repeats, "ref_size": ref_size, "seed": seed,
-            "build": "exact" if exact else "fast", "limits": limits,
-            "gamma": gamma, "config": f"L_C={config.L_C}, L={config.L}, log2_T={config.log2_T}, "
-                                      f"G_res={config.G_res}",
+            "build": "exact" if exact else "fast", "limits": limits, "gamma": gamma,
+            "baseline": None if baseline is None else str(baseline),
+            "config": f"L_C={config.L_C}, L={config.L}, log2_T={config.log2_T}, "
+                      f"G_res={config.G_res}",
             "date": datetime.datetime.now().isoformat(timespec="seconds")}
-    text = markdown(rows, meta)
-    write_atomic(out / "ngprt_kernels.md", text)
-    write_atomic(out / "ngprt_kernels.json", json.dumps({"meta": meta, "rows": rows}, indent=2))
-    print(text)
+    _write(out, "ngprt_kernels", markdown(rows, meta), meta, rows)
+    return rows
+
+
+TRAINED_SIZES = ("800x800", "1920x1080")
+
+
+def at_size(camera, width: int, height: int):
+    """A test camera at ``width`` x ``height``: :meth:`Camera.scaled_to` (intrinsics
+    scaled per axis), then ``fx`` reset to keep the test camera's pixel aspect ``fx / fy``:
+    the vertical field of view is kept and the horizontal one follows the new aspect (a
+    square test camera at 1920x1080 sees 16:9 of the scene, unstretched)."""
+    c = camera.scaled_to(width, height)
+    return replace(c, fx=c.fy * camera.fx / camera.fy)
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"frame size {text!r}: expected WIDTHxHEIGHT, e.g. 1920x1080") from None
+    if w <= 0 or h <= 0:
+        raise ValueError(f"frame size {text!r}: width and height must be positive")
+    return w, h
+
+
+def trained_markdown(rows: list[dict], meta: dict) -> str:
+    head = ["frame", "variant", "G"] + STAGE_HEAD + (BASELINE_HEAD if meta.get("baseline") else [])
+    lines = ["## NGP-RT OpenCL kernels, trained model", "",
+             f"{meta['device']}; `{meta['model']}` ({meta['config']}) on the {meta['views']} "
+             f"test cameras of `{meta['data']}`, {meta['build']} build, {meta['repeats']} "
+             f"repeats a camera after a warm-up; times over every camera and repeat, counters "
+             f"and bounds per frame (means over the cameras). Frames other than the test "
+             f"size: each test camera through `Camera.scaled_to`, then fx set so fx / fy "
+             f"stays the test camera's (square pixels): the vertical field of view is kept, "
+             f"the horizontal one follows the frame's aspect. {bounds_note(meta)}", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = [r["size"], r["variant"], "on" if r["use_G"] else "off"] + _stage_cells(r)
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def run_trained(model_path: Path, data: Path, sizes, repeats: int, out: Path, device=None,
+                exact: bool = False, views: int | None = None, baseline=None) -> list[dict]:
+    """Times a trained model on its dataset's test cameras at the test size and at
+    ``sizes`` ("WxH", :func:`at_size`), with G; writes
+    ``<out>/ngprt_kernels_<model stem>.{md,json}``."""
+    model = load_baked(model_path)
+    ds = load_dataset(data, split="test")
+    cameras = ds.cameras[:views]
+    if not cameras:
+        raise ValueError(f"{data}: the test split has no cameras")
+    limits = measure_limits(model, device)
+    test_size = f"{cameras[0].width}x{cameras[0].height}"
+    rows = []
+    for size in [test_size] + [x for x in sizes if x != test_size]:
+        w, h = _parse_size(size)
+        cams = cameras if size == test_size else [at_size(c, w, h) for c in cameras]
+        m = measure(model, cams, True, repeats, device, exact, limits, baseline, ds.background)
+        c = cams[0]
+        rows.append({"size": size, "variant": model.config.variant, "use_G": True,
+                     "camera": {"fx": c.fx, "fy": c.fy, "width": c.width, "height": c.height},
+                     **m})
+        _print_row(f"{size:>9s} {model.config.variant}", m)
+    cfg = model.config
+    meta = {"device": get_runtime(device).name, "model": str(model_path), "data": str(data),
+            "views": len(cameras), "repeats": repeats, "build": "exact" if exact else "fast",
+            "limits": limits, "baseline": None if baseline is None else str(baseline),
+            "config": f"{cfg.variant}, L_C={cfg.L_C}, L={cfg.L}, log2_T={cfg.log2_T}, "
+                      f"G_res={cfg.G_res}",
+            "date": datetime.datetime.now().isoformat(timespec="seconds")}
+    _write(out, f"ngprt_kernels_{Path(model_path).stem}", trained_markdown(rows, meta), meta, rows)
     return rows
 
 
@@ -162,6 +322,8 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--preset", default="cpu", help="model config preset (config.PRESETS)")
     p.add_argument("--scene", default="bounded", choices=["bounded", "unbounded"])
+    p.add_argument("--variant", action="append", choices=VARIANTS, dest="variants",
+                   help="an aggregation variant to time (repeatable; default all)")
     p.add_argument("--ref-size", type=int, default=100,
                    help="frame size for timing the numpy reference (scaled by pixel count)")
     p.add_argument("--out", default="results", type=Path)
@@ -170,9 +332,27 @@ def main(argv=None) -> int:
                    help="coarse grid resolution instead of the preset's (G_res = L_C / 2)")
     p.add_argument("--exact", action="store_true",
                    help="time the exact build (the one tests compare with the reference)")
+    p.add_argument("--baseline", type=Path, default=None,
+                   help="a folder of kernel sources (e.g. an older kernels/) rendered "
+                        "interleaved with the installed ones, for a speed ratio")
+    p.add_argument("--model", type=Path, default=None,
+                   help="a trained baked model: time it on --data's test cameras instead")
+    p.add_argument("--data", type=Path, default=None, help="the model's dataset folder")
+    p.add_argument("--sizes", nargs="+", default=None, metavar="WxH",
+                   help=f"with --model: frame sizes besides the test size "
+                        f"(default {' '.join(TRAINED_SIZES)})")
+    p.add_argument("--views", type=int, default=None,
+                   help="with --model: the first N test cameras (default all)")
     args = p.parse_args(argv)
+    if (args.model is None) != (args.data is None):
+        p.error("--model and --data go together")
+    if args.model is not None:
+        run_trained(args.model, args.data, args.sizes or TRAINED_SIZES, args.repeats,
+                    args.out, args.device, args.exact, args.views, args.baseline)
+        return 0
     run(args.size, args.repeats, args.preset, args.scene, min(args.ref_size, args.size),
-        args.out, args.device, L_C=args.L_C, exact=args.exact)
+        args.out, args.device, L_C=args.L_C, exact=args.exact,
+        variants=tuple(args.variants or VARIANTS), baseline=args.baseline)
     return 0
 
 

@@ -56,7 +56,7 @@ class Runtime:
         return f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
 
     def program(self, source_name: str, defines: dict | None = None,
-                exact: bool = True) -> "Program":
+                exact: bool = True, source_dir: str | None = None) -> "Program":
         """The program ``kernels/<source_name>`` built with ``-D`` defines (cached).
 
         Args:
@@ -65,10 +65,13 @@ class Runtime:
             exact: the exact build (:data:`EXACT_OPTIONS`, ``-D FAST_MATH=0``), compared
                 with the numpy references in tests; False: the fast build
                 (:data:`FAST_OPTIONS`, ``-D FAST_MATH=1``) for rendering.
+            source_dir: a folder to take the source and its headers from instead of the
+                installed ``kernels/`` (benchmarks compare kernel versions with it).
         """
         defines = {**(defines or {}), "FAST_MATH": not exact}
         opts = tuple(f"-D{k}={_define_value(v)}" for k, v in sorted(defines.items()))
-        return _build(self, source_name, (EXACT_OPTIONS if exact else FAST_OPTIONS) + opts)
+        return _build(self, source_name, (EXACT_OPTIONS if exact else FAST_OPTIONS) + opts,
+                      None if source_dir is None else str(source_dir))
 
 
 class Program:
@@ -196,13 +199,21 @@ def _kernel_dir() -> str:
 
 
 @functools.lru_cache(maxsize=None)
-def _build(runtime: Runtime, source_name: str, options: tuple[str, ...]) -> Program:
-    source = kernel_source(source_name)
-    opts = list(options) + [f"-I{_kernel_dir()}"]
+def _build(runtime: Runtime, source_name: str, options: tuple[str, ...],
+           source_dir: str | None = None) -> Program:
+    if source_dir is None:
+        source, where, include = kernel_source(source_name), f"kernels/{source_name}", _kernel_dir()
+    else:
+        path = os.path.join(source_dir, source_name)
+        if not os.path.isfile(path):
+            raise FileNotFoundError(f"{path}: kernel source not found")
+        with open(path) as f:
+            source, where, include = f.read(), path, source_dir
+    opts = list(options) + [f"-I{include}"]
     try:
         program = cl.Program(runtime.context, source).build(options=opts)
     except cl.RuntimeError as exc:
-        raise RuntimeError(f"kernels/{source_name}: build failed with {' '.join(options)}:\n{exc}") from exc
+        raise RuntimeError(f"{where}: build failed with {' '.join(options)}:\n{exc}") from exc
     return Program(program)
 
 

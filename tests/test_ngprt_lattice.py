@@ -157,7 +157,7 @@ def test_kernel_lattice_equals_reference():
     opts = list(EXACT_OPTIONS) + ["-DFAST_MATH=0", f"-I{_kernel_dir()}"] + [
         f"-D{k}={int(v) if isinstance(v, bool) else v}" for k, v in defines.items()]
     source = """
-    #include "ngprt_common.h"
+    #include "ngprt_lattice.h"
     __kernel void lattice(__global const float *od, float near, float far,
                           __global const float *sigma, __global const float *ts, int m,
                           __global float *table, __global float *t_out, __global float *s_out)

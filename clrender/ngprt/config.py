@@ -45,7 +45,7 @@ VARIANT_CODES = {v: code for code, v in enumerate(VARIANTS)}
 def kernel_constants() -> dict:
     """The constants the NGP-RT kernels share with this module, as ``-D`` defines.
 
-    The kernels define none of them themselves (``kernels/ngprt_common.h`` refuses to
+    The kernels define none of them themselves (``kernels/ngprt_model.h`` refuses to
     build without them), so a change here reaches Python and OpenCL alike.
 
     Returns:

@@ -21,6 +21,8 @@ import pyopencl as cl
 from ..device import event_ms, get_runtime, padded, work_group_size
 from .config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM, VARIANT_CODES,
                      kernel_constants)
+from .encoding import HASH_PRIMES
+from .render_ref import BOX_MARGIN, CUBE, K_BACKOFF, K_PAST_END, REGION_SCALE
 
 F32 = np.float32
 DEFERRED_PARAMS = ("deferred_w0", "deferred_b0", "deferred_w1", "deferred_b1",
@@ -36,15 +38,30 @@ def lane_width(device, cap: int = 16) -> int:
     return max(w for w in LANE_WIDTHS if w <= min(width, cap))
 
 
+def march_constants() -> dict:
+    """The march's constants shared with the numpy reference, as ``-D`` defines: the hash
+    primes (:data:`clrender.ngprt.encoding.HASH_PRIMES`) and the skip's back-off and
+    margins (:mod:`clrender.ngprt.render_ref`, ``kernels/ngprt_skip.h``); floats as
+    float32 literals."""
+    out = {f"HASH_PRIME_{axis}": int(p) for axis, p in zip("XYZ", HASH_PRIMES)}
+    for name, value in (("K_BACKOFF", K_BACKOFF), ("K_PAST_END", K_PAST_END),
+                        ("BOX_MARGIN", BOX_MARGIN), ("REGION_SCALE", REGION_SCALE),
+                        ("CUBE", CUBE)):
+        out[name] = float(value)
+    return out
+
+
 def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1) -> tuple[dict, dict]:
     """The ``-D`` defines of the march and deferred programs for a model config: the
-    shared constants of :func:`clrender.ngprt.config.kernel_constants` (the kernels define
-    none of their own) plus the model's sizes, variant and scene, and the lanes per
-    work-item (``rays`` for the march, ``deferred_vec`` for the deferred MLP)."""
+    shared constants of :func:`clrender.ngprt.config.kernel_constants` and
+    :func:`march_constants` (the kernels define none of their own) plus the model's
+    sizes, variant and scene, and the lanes per work-item (``rays`` for the march,
+    ``deferred_vec`` for the deferred MLP)."""
     shared = kernel_constants()
     march = {
-        **shared, "L": config.L, "L_C": config.L_C, "LOG2_T": config.log2_T,
-        "VARIANT": VARIANT_CODES[config.variant], "UNBOUNDED": config.scene == "unbounded",
+        **shared, **march_constants(), "L": config.L, "L_C": config.L_C,
+        "LOG2_T": config.log2_T, "VARIANT": VARIANT_CODES[config.variant],
+        "UNBOUNDED": config.scene == "unbounded", "EXTENT": float(config.extent),
         "USE_G": bool(use_G), "G_RES": config.G_res,
         "COARSE_BLOCK": config.coarse_block, "N_ATT": config.n_attention,
         "N_INV": config.n_inv_attention, "RAYS": rays, "G_IN_CODE": g_in_codes(config),
@@ -137,6 +154,8 @@ class Renderer:
             same samples and differs in exp-based values by a few ulps.
         rays, deferred_vec: lanes per work-item of the march and the deferred MLP
             (default :func:`lane_width` of the device).
+        kernel_dir: build the kernels from this folder instead of the installed
+            ``kernels/`` (``bench.ngprt_kernels --baseline``: another version of them).
     """
 
     SCALAR_STATS = {"Marching": "n_march", "Occupied": "n_occ"}
@@ -144,7 +163,8 @@ class Renderer:
     TIME_NOTE = "OpenCL kernel time per frame (ray marching + deferred MLP)"
 
     def __init__(self, model, device=None, use_G: bool = True, exact: bool = False,
-                 rays: int | None = None, deferred_vec: int | None = None):
+                 rays: int | None = None, deferred_vec: int | None = None,
+                 kernel_dir: str | None = None):
         self.model, self.config, self.use_G = model, model.config, bool(use_G)
         self.exact = bool(exact)
         self.runtime = rt = get_runtime(device)
@@ -152,9 +172,10 @@ class Renderer:
         self.deferred_vec = deferred_vec or lane_width(rt.device)
         march_defs, deferred_defs = kernel_defines(self.config, self.use_G, self.deferred_vec,
                                                    self.rays)
-        self._march = rt.program("ngprt_march.cl", march_defs, exact).kernel("ngprt_march")
-        self._deferred = rt.program("ngprt_deferred.cl", deferred_defs,
-                                    exact).kernel("ngprt_deferred")
+        self._march = rt.program("ngprt_march.cl", march_defs, exact,
+                                 kernel_dir).kernel("ngprt_march")
+        self._deferred = rt.program("ngprt_deferred.cl", deferred_defs, exact,
+                                    kernel_dir).kernel("ngprt_deferred")
         self.step = F32(model.step)
         self._local = {}
         self._upload()

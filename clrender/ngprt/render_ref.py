@@ -108,6 +108,18 @@ def g_distance(model, u: np.ndarray, exit_lev: np.ndarray, use_G: bool) -> np.nd
 
 # ---- empty-space skipping ---------------------------------------------------------
 
+# Skip constants (docs/ngprt.md "skip"), shared with kernels/ngprt_skip.h as -D defines
+# (render_cl.kernel_defines). A closed-form exit is backed off by K_BACKOFF steps before
+# rounding up to a lattice index (the float exit distance may overshoot); a skip's index
+# is clamped K_PAST_END steps past the ray's end (any k past it will do, ints stay small).
+K_BACKOFF, K_PAST_END = F32(1e-3), F32(2.0)
+# Unbounded margins: a box is shrunk by 1/64 of the grid cell it stands for on every
+# face; the outer regions of the contraction are left 2^-10 * |x|_inf before the planes
+# |x_b| = |x_a| where it switches axis (a jump); the cube inscribed in G's ball has
+# half-side 0.57735 (< 1/sqrt(3)) of the ball's radius.
+BOX_MARGIN, REGION_SCALE, CUBE = F32(1 / 64), F32(1 - 2**-10), F32(0.57735)
+
+
 def _in_cell(cfg, o, d, k, s, res, cell) -> np.ndarray:
     """(M,) bool: lattice point k of each ray lies in ``cell`` at resolution ``res``
     (bounded scenes: ``t_k = k * s``), computed exactly as the march places it."""
@@ -148,8 +160,8 @@ def skip_bounded(model, k, t, o, d, u, exit_lev, g, s, g_end) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         t_a = (np.where(d > 0, hi, lo) - o) / d
     t_exit = np.where(d != 0, t_a, F32(np.inf)).min(axis=1)
-    lim = g_end / s + F32(2.0)      # past the ray's end any k will do: keeps ints small
-    k_next = np.maximum(k + 1, np.ceil(np.minimum(t_exit / s - F32(1e-3), lim)).astype(np.int64))
+    lim = g_end / s + K_PAST_END
+    k_next = np.maximum(k + 1, np.ceil(np.minimum(t_exit / s - K_BACKOFF, lim)).astype(np.int64))
     check = np.flatnonzero(k_next - 1 > k)
     out = check[~_in_cell(cfg, o[check], d[check], k_next[check] - 1, s, res[check],
                           cell[check])]
@@ -159,13 +171,6 @@ def skip_bounded(model, k, t, o, d, u, exit_lev, g, s, g_end) -> np.ndarray:
     r = F32(2.0) * g.astype(F32) / F32(cfg.G_res)
     k_G = np.floor(np.minimum((t + r) / s, lim)).astype(np.int64)
     return np.where(g > 0, np.maximum(k_next, k_G), k_next)
-
-
-# Unbounded skip: margins (docs/ngprt.md "skip"). A box is shrunk by 1/64 of the grid
-# cell it stands for on every face; the outer regions of the contraction are left
-# 2^-10 * |x|_inf before the planes |x_b| = |x_a| where it switches axis (a jump); the
-# cube inscribed in G's ball has half-side 0.57735 (< 1/sqrt(3)) of the ball's radius.
-BOX_MARGIN, REGION_SCALE, CUBE = F32(1 / 64), F32(1 - 2**-10), F32(0.57735)
 
 
 def _box_exit(o, d, t, lo, hi) -> np.ndarray:
@@ -231,7 +236,7 @@ def skip_unbounded(model, k, o, d, u, exit_lev, g, s, g_end, table) -> np.ndarra
     half = F32(4.0) * radius * CUBE - F32(4.0) / F32(cfg.G_res) * BOX_MARGIN
     cube = (g > 0) & (half > 0)
     c0 = u * F32(4.0) - F32(2.0)
-    lim = g_end / s + F32(2.0)
+    lim = g_end / s + K_PAST_END
     k = k.copy()
     walking = np.ones(len(k), bool)
     while walking.any():
@@ -241,7 +246,7 @@ def skip_unbounded(model, k, o, d, u, exit_lev, g, s, g_end, table) -> np.ndarra
         T = _box_exit(o[w], d[w], t, lo[w], hi[w])
         Tc = _box_exit(o[w], d[w], t, c0[w] - half[w, None], c0[w] + half[w, None])
         T = np.where(cube[w], np.maximum(T, Tc), T)
-        x = np.minimum(lattice_s(tw, T) / s - F32(1e-3), lim[w])
+        x = np.minimum(lattice_s(tw, T) / s - K_BACKOFF, lim[w])
         k[w] = np.maximum(k[w] + 1, np.ceil(x).astype(np.int64))
         uk = _point_u(cfg, o[w], d[w], lattice_t(tw, _lattice_g(k[w], s)))
         same = np.all(_cells(uk, res[w]) == cell[w], axis=1)

@@ -1,8 +1,9 @@
 """Scene-space geometry shared by the renderers and training (numpy, float32).
 
-Everything here is written so that ``kernels/ngprt_common.h`` can mirror it operation
-for operation: the OpenCL build disables FP contraction and asks for correctly rounded
-division and sqrt, so positions, cells and lattice indices agree bit for bit.
+Everything here is written so that the NGP-RT kernels (``kernels/ngprt_space.h``,
+``ngprt_lattice.h``) can mirror it operation for operation: the OpenCL build disables FP
+contraction and asks for correctly rounded division and sqrt, so positions, cells and
+lattice indices agree bit for bit.
 
 * Contraction (unbounded scenes): MERF's piecewise-projective map of R^3 into [-2, 2]^3.
 * Grid coordinates: ``u = (c + E) / (2E)`` in [0, 1]^3 with E = ``ModelConfig.extent``.

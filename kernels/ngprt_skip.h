@@ -1,0 +1,246 @@
+/* Empty-space skipping (docs/ngprt.md "skip", paper §4.3, Eq. 9): from an empty lattice
+ * point to the next one that may be occupied, with the occupancy mip and (USE_G) the
+ * occupancy distance grid G; render_ref.skip_bounded and skip_unbounded.
+ *
+ * Constants shared with clrender/ngprt/render_ref.py, as -D float literals
+ * (render_cl.kernel_defines):
+ *   K_BACKOFF   steps taken off a closed-form exit before rounding up to a lattice index
+ *               (the float exit distance may overshoot);
+ *   K_PAST_END  steps past the ray's end where a skip's index is clamped (any k past the
+ *               end is as good as another, and the int stays small);
+ *   unbounded: BOX_MARGIN (a box is shrunk by this fraction of its grid cell on every
+ *   face), REGION_SCALE (the outer regions of the contraction keep 1 - REGION_SCALE of
+ *   |x|_inf away from the planes |x_b| = |x_a| where it switches axis, a jump) and CUBE
+ *   (half-side of the cube inscribed in G's ball over its radius, < 1/sqrt(3)).
+ */
+#ifndef CLRENDER_NGPRT_SKIP_H
+#define CLRENDER_NGPRT_SKIP_H
+#pragma OPENCL FP_CONTRACT OFF
+#include "ngprt_math.h"
+#include "ngprt_space.h"
+
+#if !defined(K_BACKOFF) || !defined(K_PAST_END) || !defined(BOX_MARGIN) || \
+    !defined(REGION_SCALE) || !defined(CUBE)
+#error "ngprt kernels need -D K_BACKOFF K_PAST_END BOX_MARGIN REGION_SCALE CUBE (render_ref)"
+#endif
+
+/* The distance grid value (G-voxels) of the lanes in `read`, else 0 (paper §4.3: read
+ * only when the exit level is coarser than G): from the exit code's high byte
+ * (G_IN_CODE, render_cl.exit_codes) or from G. */
+inline vint v_g_distance(const ngp_model *m, vpoint u, vint read, vint g_code)
+{
+#if USE_G && G_IN_CODE
+    return select((vint)(0), g_code, read);      /* exit_codes put it there */
+#elif USE_G
+    if (any(read))
+        return v_gather_u8(m->G, v_flat(v_cell(u, (vint)(G_RES)), (vint)(G_RES)), read);
+#endif
+    return (vint)(0);
+}
+
+/* The last lattice index a skip may return: past the ray's end any k will do. */
+inline vfloat v_k_limit(const v_rays *r)
+{
+    return r->g_end / r->s + K_PAST_END;
+}
+
+#if !UNBOUNDED
+/* One lane's ray, for the bisection of the bounded skip. */
+typedef struct {
+    float3 o, d;
+    float s;
+} ngp_ray;
+
+/* Lattice point k (t_k = k * s) lies in `cell` at resolution res (ngp_point_u: the
+ * operations of v_point_u, bounded). */
+inline bool ngp_in_cell(const ngp_ray *r, int k, int res, int3 cell)
+{
+    const float3 u = (r->o + ((float)k * r->s) * r->d + EXTENT_F) / (2.0f * EXTENT_F);
+    const float hi = (float)(res - 1);
+    const float3 v = u * (float)res;
+    const int3 c = (int3)((int)(v.x < 0.0f ? 0.0f : (v.x > hi ? hi : v.x)),
+                          (int)(v.y < 0.0f ? 0.0f : (v.y > hi ? hi : v.y)),
+                          (int)(v.z < 0.0f ? 0.0f : (v.z > hi ? hi : v.z)));
+    return c.x == cell.x && c.y == cell.y && c.z == cell.z;
+}
+
+/* First lattice point outside `cell` in (k_in, k_out]: k_in is inside, k_out outside.
+ * Per axis the cell of t_k is monotone in k, so the points inside form one run. */
+inline int ngp_first_outside(const ngp_ray *r, int k_in, int k_out, int res, int3 cell)
+{
+    while (k_out - k_in > 1) {
+        const int mid = k_in + (k_out - k_in) / 2;
+        if (ngp_in_cell(r, mid, res, cell)) k_in = mid; else k_out = mid;
+    }
+    return k_out;
+}
+
+/* First lattice index after each lane's exit of the cell at u, at resolution res, in
+ * closed form (rays are straight in u space): always > k. The float exit distance is
+ * off by up to ~1e-7 / |d_a| world units (many steps for a tiny direction component),
+ * so the candidate is checked: if point k_next - 1 has left the cell, bisect for the
+ * first point outside it. */
+inline vint v_cell_exit(const v_rays *r, const v_march_point *p, vint empty, vint lev)
+{
+    const float3 o = r->o;
+    const vpoint d = r->d;
+    const float s = r->s;
+    const vint res = (vint)(L_C) >> lev;
+    /* 2 / res: L_C >> lev = L_C / 2^lev exactly, and scaling by 2^lev is exact. */
+    const vfloat h = (2.0f / (float)L_C) * VF((vint)(1) << lev);
+    vcell i;
+    i.x = p->cell.x >> lev;
+    i.y = p->cell.y >> lev;
+    i.z = p->cell.z >> lev;
+    const vfloat lo_x = VF(i.x) * h - 1.0f, lo_y = VF(i.y) * h - 1.0f, lo_z = VF(i.z) * h - 1.0f;
+    const vfloat hi_x = lo_x + h, hi_y = lo_y + h, hi_z = lo_z + h;
+    vfloat t_exit = (vfloat)(INFINITY);
+    t_exit = select(t_exit, v_min(t_exit, (select(lo_x, hi_x, VMASK(d.x > 0.0f)) - o.x) / d.x),
+                    VMASK(d.x != 0.0f));
+    t_exit = select(t_exit, v_min(t_exit, (select(lo_y, hi_y, VMASK(d.y > 0.0f)) - o.y) / d.y),
+                    VMASK(d.y != 0.0f));
+    t_exit = select(t_exit, v_min(t_exit, (select(lo_z, hi_z, VMASK(d.z > 0.0f)) - o.z) / d.z),
+                    VMASK(d.z != 0.0f));
+    const vint k = r->k;
+    vint k_next = max(k + 1, v_ceil_i(v_min(t_exit / s - K_BACKOFF, v_k_limit(r))));
+    const vint check = empty & VMASK(k_next - 1 > k);
+    if (any(check)) {
+        const vint k_last = select(k, k_next - 1, check);
+        const vint outside = check & ~v_same_cell(v_cell(v_point_u(o, d, VF(k_last) * s), res), i);
+        FOR_LANES(j) {
+            if (!LANE_I(outside, j)) continue;
+            const ngp_ray rj = {o, (float3)(LANE_F(d.x, j), LANE_F(d.y, j), LANE_F(d.z, j)), s};
+            const int3 ij = (int3)(LANE_I(i.x, j), LANE_I(i.y, j), LANE_I(i.z, j));
+            LANE_I(k_next, j) = ngp_first_outside(&rj, LANE_I(k, j), LANE_I(k_last, j),
+                                                  LANE_I(res, j), ij);
+        }
+    }
+    return k_next;
+}
+
+/* Next lattice index (> k) of the lanes in `empty`, whose exit code is `code`: past the
+ * empty mip cell (v_cell_exit) and, where G is read, past G's empty ball of radius
+ * 2 g / G_RES world units (render_ref.skip_bounded). */
+inline vint v_skip(const ngp_model *m, const v_rays *r, const v_march_point *p, vint empty,
+                   vint code)
+{
+    const vint lev = (code & 0xff) - 1;
+    const vint k_next = v_cell_exit(r, p, empty, lev);
+    const vint g = v_g_distance(m, p->u, empty & VMASK(((vint)(L_C) >> lev) < G_RES), code >> 8);
+    if (!any(VMASK(g > 0))) return k_next;
+    const vfloat radius = 2.0f * VF(g) / (float)G_RES;
+    const vint k_g = v_floor_i(v_min((p->t + radius) / r->s, v_k_limit(r)));
+    return select(k_next, max(k_next, k_g), VMASK(g > 0));
+}
+#else
+/* A face f + beta (t' - t) >= 0 of a box (where `on`): the point at t must satisfy it,
+ * and it bounds t' - t by f / -beta when beta < 0. */
+inline void ngp_face(float f, float beta, bool on, float *dt, bool *inside)
+{
+    if (!on) return;
+    *inside = *inside && f >= 0.0f;
+    if (beta < 0.0f) *dt = ngp_minf(*dt, f / -beta);
+}
+
+/* The largest t' >= t such that the ray stays in the box [lo, hi] (contracted space)
+ * over [t, t'] within the projective region of the contraction it is in at t; t when
+ * the point at t is outside. Inside |x|_inf <= 1, c = x; outside, with a the axis of
+ * |x|_inf = sg * x_a = m, c_b = x_b / m and sg * c_a = 2 - 1/m: every face is linear in
+ * t' there. */
+inline float ngp_box_exit(float3 o, float3 d3, float t, float3 lo3, float3 hi3)
+{
+    const float3 p3 = o + t * d3;
+    const float p[3] = {p3.x, p3.y, p3.z}, d[3] = {d3.x, d3.y, d3.z};
+    const float lo[3] = {lo3.x, lo3.y, lo3.z}, hi[3] = {hi3.x, hi3.y, hi3.z};
+    const float ax = ngp_absf(p[0]), ay = ngp_absf(p[1]), az = ngp_absf(p[2]);
+    const float m = ngp_maxf(ngp_maxf(ax, ay), az);
+    const int a = ax == m ? 0 : (ay == m ? 1 : 2);
+    const float sg = p[a] > 0.0f ? 1.0f : -1.0f;
+    const float ms = sg * p[a], dm = sg * d[a];
+    const bool inner = m <= 1.0f;
+    float dt = INFINITY;
+    bool inside = true;
+    for (int b = 0; b < 3; ++b) {
+        ngp_face(p[b] - lo[b], d[b], inner, &dt, &inside);
+        ngp_face(hi[b] - p[b], -d[b], inner, &dt, &inside);
+        ngp_face(1.0f - p[b], -d[b], inner, &dt, &inside);
+        ngp_face(1.0f + p[b], d[b], inner, &dt, &inside);
+        const bool other = !inner && a != b;
+        ngp_face(ms * REGION_SCALE - p[b], dm * REGION_SCALE - d[b], other, &dt, &inside);
+        ngp_face(ms * REGION_SCALE + p[b], dm * REGION_SCALE + d[b], other, &dt, &inside);
+        ngp_face(p[b] - lo[b] * ms, d[b] - lo[b] * dm, other, &dt, &inside);
+        ngp_face(hi[b] * ms - p[b], hi[b] * dm - d[b], other, &dt, &inside);
+    }
+    if (!inner) {
+        ngp_face(ms - 1.0f, dm, true, &dt, &inside);
+        const float lo_a = sg > 0.0f ? lo[a] : -hi[a], hi_a = sg > 0.0f ? hi[a] : -lo[a];
+        if (lo_a < 2.0f) ngp_face(ms - 1.0f / (2.0f - lo_a), dm, true, &dt, &inside);
+        else inside = false;
+        if (hi_a < 2.0f) ngp_face(1.0f / (2.0f - hi_a) - ms, -dm, true, &dt, &inside);
+    }
+    return inside ? t + dt : t;
+}
+
+/* The largest distance T_j of lane j (in `walking`) to which its ray stays in both boxes
+ * of its skip from t_j: the empty mip cell shrunk by BOX_MARGIN and, where `cube`, the
+ * cube inscribed in G's ball about u (ngp_box_exit). */
+inline vfloat v_boxes_exit(const v_rays *r, vfloat tk, vint walking, vcell cell, vint res,
+                           vpoint u, vint cube, vfloat half_side)
+{
+    const vfloat size = 4.0f / VF(res);           /* a cell, in contracted units */
+    const vfloat margin = size * BOX_MARGIN;
+    vfloat T = tk;
+    FOR_LANES(j) {
+        if (!LANE_I(walking, j)) continue;
+        const float sz = LANE_F(size, j), mg = LANE_F(margin, j), hf = LANE_F(half_side, j);
+        const float3 i = (float3)((float)LANE_I(cell.x, j), (float)LANE_I(cell.y, j),
+                                  (float)LANE_I(cell.z, j));
+        const float3 dj = (float3)(LANE_F(r->d.x, j), LANE_F(r->d.y, j), LANE_F(r->d.z, j));
+        const float3 cj = (float3)(LANE_F(u.x, j), LANE_F(u.y, j), LANE_F(u.z, j)) * 4.0f
+                          - 2.0f;
+        const float tj = LANE_F(tk, j);
+        float Tj = ngp_box_exit(r->o, dj, tj, i * sz - 2.0f + mg, (i + 1.0f) * sz - 2.0f - mg);
+        if (LANE_I(cube, j)) Tj = ngp_maxf(Tj, ngp_box_exit(r->o, dj, tj, cj - hf, cj + hf));
+        LANE_F(T, j) = Tj;
+    }
+    return T;
+}
+
+/* Unbounded skip of the lanes in `empty`, whose exit code is `code` (no memory read but
+ * G): the first lattice point outside both the empty mip cell and, when G was read, the
+ * ball of radius g / G_RES (u units) about u, as a walk point by point finds it, jumping
+ * in closed form over the points in the shrunk cell or in the shrunk cube inscribed in
+ * the ball (v_boxes_exit); the point after a jump is tested, and the lane goes on from
+ * it while it is inside. render_ref.skip_unbounded. */
+inline vint v_skip(const ngp_model *m, const v_rays *r, const v_march_point *p, vint empty,
+                   vint code)
+{
+    const vint lev = (code & 0xff) - 1;
+    const vint res = (vint)(L_C) >> lev;
+    vcell cell;
+    cell.x = p->cell.x >> lev;
+    cell.y = p->cell.y >> lev;
+    cell.z = p->cell.z >> lev;
+    const vpoint u = p->u;
+    const vint g = v_g_distance(m, u, empty & VMASK(res < G_RES), code >> 8);
+    const vfloat radius = VF(g) / (float)G_RES;   /* u is in [0, 1]^3 */
+    const vfloat half_side = 4.0f * radius * CUBE - 4.0f / (float)G_RES * BOX_MARGIN;
+    const vint cube = VMASK(g > 0) & VMASK(half_side > 0.0f);
+    const vfloat lim = v_k_limit(r);
+    vint k = r->k, walking = empty;
+    vfloat tk = v_lattice_t(r->lt, v_lattice_g(r, k));
+    while (any(walking)) {
+        const vfloat T = v_boxes_exit(r, tk, walking, cell, res, u, cube, half_side);
+        const vint jump = v_ceil_i(v_min(v_lattice_s(r->lt, T) / r->s - K_BACKOFF, lim));
+        k = select(k, max(k + 1, jump), walking);
+        tk = v_lattice_t(r->lt, v_lattice_g(r, k));
+        const vpoint uk = v_point_u(r->o, r->d, tk);
+        const vfloat dx = uk.x - u.x, dy = uk.y - u.y, dz = uk.z - u.z;
+        const vint stay = v_same_cell(v_cell(uk, res), cell)
+                          | (VMASK(g > 0) & VMASK(sqrt(dx * dx + dy * dy + dz * dz) < radius));
+        walking = walking & stay & VMASK(v_lattice_g(r, k) < r->g_end);
+    }
+    return k;
+}
+#endif
+#endif

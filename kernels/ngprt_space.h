@@ -1,0 +1,161 @@
+/* Scene space per lane (clrender/ngprt/space.py, render_ref.py): the rays of a
+ * work-item, their range, the lattice points they march and the grid cells of a point.
+ *
+ * The exact build (device.EXACT_OPTIONS) keeps FP contraction off and asks for correctly
+ * rounded division and sqrt, so positions, cells and lattice indices are bit-identical
+ * to the numpy reference; the fast build computes them by the same operations.
+ */
+#ifndef CLRENDER_NGPRT_SPACE_H
+#define CLRENDER_NGPRT_SPACE_H
+#pragma OPENCL FP_CONTRACT OFF
+#include "camera.h"
+#include "ngprt_model.h"
+#include "ngprt_lanes.h"
+#include "ngprt_lattice.h"
+
+/* The RAYS rays of a work-item: their fixed geometry, then the march state of each lane
+ * (the twin of render_ref._Rays). The lattice tables and the accumulators are arrays the
+ * struct points to, held apart: acc is indexed by lane at run time, and an array indexed
+ * so inside the struct would keep every field in memory instead of registers. */
+typedef struct {
+    float3 o;              /* the camera's origin, every lane */
+    vpoint d;              /* unit directions */
+    float s, far;          /* the step (lattice units); far, where unbounded rays end */
+    vfloat g_end;          /* lattice distance of the ray's end: t_end, unbounded S(far) */
+    v_lattice *lt;         /* unbounded: each lane's lattice table */
+    vint k;                /* the current lattice index */
+    vfloat T, opacity, depth_acc;
+    float8 *acc;           /* [RAYS] composited features; .s0 (w * sigma logit) unused */
+    vint n_march, n_occ;   /* marching points, occupied samples */
+} v_rays;
+
+/* A lattice point of each lane: distance t, grid coordinates u, finest cell (L_C). */
+typedef struct {
+    vfloat t;
+    vpoint u;
+    vcell cell;
+} v_march_point;
+
+/* camera_ray_dir of pixels (px, py), the same operations in the same order. */
+inline vpoint v_ray_dir(__global const float *cam, vint px, int py)
+{
+    const vfloat a = (VF(px) + 0.5f - cam[2]) / cam[0];
+    const float b = -(((float)py + 0.5f - cam[3]) / cam[1]);
+    vpoint d;
+    d.x = cam[4] * a + cam[5] * b - cam[6];
+    d.y = cam[7] * a + cam[8] * b - cam[9];
+    d.z = cam[10] * a + cam[11] * b - cam[12];
+    const vfloat norm = sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+    d.x = d.x / norm;
+    d.y = d.y / norm;
+    d.z = d.z / norm;
+    return d;
+}
+
+/* Grid coordinates u = to_grid(o + t * d) per lane (space.to_grid). */
+inline vpoint v_point_u(float3 o, vpoint d, vfloat t)
+{
+    vpoint p;
+    p.x = o.x + t * d.x;
+    p.y = o.y + t * d.y;
+    p.z = o.z + t * d.z;
+#if UNBOUNDED
+    p = v_contract(p);
+#endif
+    p.x = (p.x + EXTENT_F) / (2.0f * EXTENT_F);
+    p.y = (p.y + EXTENT_F) / (2.0f * EXTENT_F);
+    p.z = (p.z + EXTENT_F) / (2.0f * EXTENT_F);
+    return p;
+}
+
+/* Cell of u at a per-lane resolution res, clamped to the grid (space.cell_index).
+ * Clamping the float to [0, res-1] before flooring gives the same cell as clamping
+ * floor(u * res), and the clamped value is non-negative, so floor is the conversion. */
+inline vint v_cell1(vfloat v, vint res)
+{
+    const vfloat hi = VF(res - 1);
+    return VI(select(select(v, hi, VMASK(v > hi)), 0.0f, VMASK(v < 0.0f)));
+}
+
+inline vcell v_cell(vpoint u, vint res)
+{
+    const vfloat r = VF(res);
+    vcell c;
+    c.x = v_cell1(u.x * r, res);
+    c.y = v_cell1(u.y * r, res);
+    c.z = v_cell1(u.z * r, res);
+    return c;
+}
+
+/* The cell's index in a res^3 grid, C order. */
+inline vint v_flat(vcell i, vint res)
+{
+    return (i.x * res + i.y) * res + i.z;
+}
+
+inline vint v_same_cell(vcell a, vcell b)
+{
+    return VMASK(a.x == b.x) & VMASK(a.y == b.y) & VMASK(a.z == b.z);
+}
+
+/* Lattice distance k * s of lattice index k (render_ref._lattice_g). */
+inline vfloat v_lattice_g(const v_rays *r, vint k)
+{
+    return VF(k) * r->s;
+}
+
+/* Lattice point k of each lane: t_k = k * s, unbounded S^-1(k * s) (lattice_point). */
+inline v_march_point v_point_at(const v_rays *r, vint k)
+{
+    v_march_point p;
+#if UNBOUNDED
+    p.t = v_lattice_t(r->lt, v_lattice_g(r, k));
+#else
+    p.t = v_lattice_g(r, k);
+#endif
+    p.u = v_point_u(r->o, r->d, p.t);
+    p.cell = v_cell(p.u, (vint)(L_C));
+    return p;
+}
+
+/* The rays of pixels (px, py) and their range (render_ref.ray_range), the march state
+ * cleared: returns the lanes that hit (t_start <= t_end; not for a missed box, nor
+ * inf/NaN from an axis-parallel ray outside it, nor px past the image), with g_end the
+ * end of the lattice distance and k the first lattice index: bounded t_end and
+ * ceil(t_start / s) (0 where missed: ceil() of inf never reaches an int); unbounded
+ * S(far) and 0, each lane's lattice built into *r->lt (r->lt and r->acc point to the
+ * work-item's arrays). */
+inline vint v_rays_start(v_rays *r, __global const float *cam, vint px, int py, int width,
+                         float s, float near, float far)
+{
+    r->o = camera_ray_origin(cam);
+    r->d = v_ray_dir(cam, px, py);
+    r->s = s;
+    r->far = far;
+    r->T = (vfloat)(1.0f);
+    r->opacity = r->depth_acc = (vfloat)(0.0f);
+    r->n_march = r->n_occ = (vint)(0);
+    FOR_LANES(j) r->acc[j] = (float8)(0.0f);
+#if UNBOUNDED
+    v_lattice_build(r->o, r->d, near, far, r->lt);
+    r->g_end = r->lt->cum[LATTICE_BREAKS - 1];
+    r->k = (vint)(0);
+    return VMASK(px < width);
+#else
+    /* space.ray_box per lane; fmin/fmax drop the NaN of 0 * inf like numpy's. */
+    const float3 o = r->o;
+    const vpoint d = r->d;
+    const vfloat ix = 1.0f / d.x, iy = 1.0f / d.y, iz = 1.0f / d.z;
+    const vfloat x0 = (-1.0f - o.x) * ix, x1 = (1.0f - o.x) * ix;
+    const vfloat y0 = (-1.0f - o.y) * iy, y1 = (1.0f - o.y) * iy;
+    const vfloat z0 = (-1.0f - o.z) * iz, z1 = (1.0f - o.z) * iz;
+    const vfloat t_in = fmax(fmax(fmin(x0, x1), fmin(y0, y1)), fmin(z0, z1));
+    const vfloat t_start = fmax((vfloat)(near), t_in);
+    const vfloat t_end = fmin(fmin(fmax(x0, x1), fmax(y0, y1)), fmax(z0, z1));
+    r->g_end = t_end;
+    const vint hit = VMASK(t_start <= t_end) & VMASK(px < width);
+    r->k = select((vint)(0), v_ceil_i(select((vfloat)(0.0f), t_start / s, hit)), hit);
+    return hit;
+#endif
+}
+#endif
