@@ -1,4 +1,4 @@
-"""The NGP-RT and NDRF kernels under the Oclgrind simulator: no out-of-bounds access, no
+"""The NGP-RT kernels under the Oclgrind simulator: no out-of-bounds access, no
 data race, no use of uninitialised values, no OpenCL API misuse.
 
 NGP-RT: generates camera rays (kernels/camera.cl) and renders a tiny random model (L_C=16,
