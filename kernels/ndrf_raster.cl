@@ -155,16 +155,20 @@ inline void write_hit(const Target *tg, int k, int p, float depth, int id)
 #endif
 }
 
-/* Cover the pixels of [x0, x1] x [y0, y1] (within the triangle's bounds) that t covers. */
-inline void cover(__global const float *cam, const Tri *t, const Target *tg, int x0, int y0,
-                  int x1, int y1)
+/* Cover the pixels of [x0, x1] x [y0, y1] (within the triangle's bounds) that t covers.
+ * ray_ab: the pixel rays' a (width floats, then b: height floats) of kernels/camera.h,
+ * (px + 0.5 - cx) / fx and -((py + 0.5 - cy) / fy), computed once a frame on the host
+ * with the same float32 operations (clrender/ndrf/raster_cl.py). */
+inline void cover(__global const float *ray_ab, const Tri *t, const Target *tg, int x0,
+                  int y0, int x1, int y1)
 {
+    __global const float *ray_b = ray_ab + tg->width;
     const float nx = t->c[0] + t->c[3] + t->c[6], ny = t->c[1] + t->c[4] + t->c[7];
     const float nz = t->c[2] + t->c[5] + t->c[8];
     for (int py = max(y0, t->y0); py <= min(y1, t->y1); ++py) {
-        const float ry = -(((float)py + 0.5f - cam[3]) / cam[1]);
+        const float ry = ray_b[py];
         for (int px = max(x0, t->x0); px <= min(x1, t->x1); ++px) {
-            const float rx = ((float)px + 0.5f - cam[2]) / cam[0];
+            const float rx = ray_ab[px];
             if (!edge_covers(t->c, rx, ry) || !edge_covers(t->c + 3, rx, ry) ||
                 !edge_covers(t->c + 6, rx, ry))
                 continue;
@@ -198,8 +202,9 @@ __kernel void ndrf_raster_clear(const int n, TARGET_ARGS)
 __kernel void ndrf_raster_tris(__global const float *cam, const int width, const int height,
                                const int n_faces, __global const int *face_start,
                                __global const int *faces, __global const float *vertices,
-                               const int capacity, volatile __global int *n_pairs,
-                               __global int *pairs, TARGET_ARGS)
+                               __global const float *ray_ab, const int capacity,
+                               volatile __global int *n_pairs, __global int *pairs,
+                               TARGET_ARGS)
 {
     const int g = (int)get_global_id(0);
     if (g >= n_faces) return;
@@ -207,7 +212,7 @@ __kernel void ndrf_raster_tris(__global const float *cam, const int width, const
     if (!tri_setup(g, cam, width, height, face_start, faces, vertices, &t)) return;
     const Target tg = TARGET_INIT;
     if (t.x1 - t.x0 < TILE && t.y1 - t.y0 < TILE) {
-        cover(cam, &t, &tg, t.x0, t.y0, t.x1, t.y1);
+        cover(ray_ab, &t, &tg, t.x0, t.y0, t.x1, t.y1);
         return;
     }
     const int tx0 = t.x0 / TILE, tx1 = t.x1 / TILE, ty0 = t.y0 / TILE, ty1 = t.y1 / TILE;
@@ -225,8 +230,8 @@ __kernel void ndrf_raster_tris(__global const float *cam, const int width, const
 
 __kernel void ndrf_raster_tiles(__global const float *cam, const int width, const int height,
                                 __global const int *face_start, __global const int *faces,
-                                __global const float *vertices, const int n_pairs,
-                                __global const int *pairs, TARGET_ARGS)
+                                __global const float *vertices, __global const float *ray_ab,
+                                const int n_pairs, __global const int *pairs, TARGET_ARGS)
 {
     const int i = (int)get_global_id(0);
     if (i >= n_pairs) return;
@@ -237,7 +242,7 @@ __kernel void ndrf_raster_tiles(__global const float *cam, const int width, cons
     const int tiles_x = (width + TILE - 1) / TILE;
     const int row = pair.y / tiles_x;                   /* no %: see ndrf_raster_tris */
     const int x0 = (pair.y - row * tiles_x) * TILE, y0 = row * TILE;
-    cover(cam, &t, &tg, x0, y0, x0 + TILE - 1, y0 + TILE - 1);
+    cover(ray_ab, &t, &tg, x0, y0, x0 + TILE - 1, y0 + TILE - 1);
 }
 
 inline float dot3(const float *a, const float *b)

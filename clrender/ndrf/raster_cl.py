@@ -51,6 +51,16 @@ def packed_geometry(meshes) -> dict:
             "vertices": np.concatenate(vertices)}
 
 
+def pixel_ray_ab(camera) -> np.ndarray:
+    """(W + H,) float32: a = (x + 0.5 - cx) / fx per column, then b = -((y + 0.5 - cy) / fy)
+    per row, the camera-space pixel ray (a, b, -1) with the float32 operations of
+    ``kernels/camera.h`` (and :func:`clrender.camera.generate_rays`), bit for bit."""
+    p = camera.packed()
+    x = np.arange(camera.width, dtype=F32) + F32(0.5)
+    y = np.arange(camera.height, dtype=F32) + F32(0.5)
+    return np.concatenate([(x - p[2]) / p[0], -((y - p[3]) / p[1])]).astype(F32)
+
+
 class Rasteriser:
     """First hits of every pixel on K meshes, computed on an OpenCL device.
 
@@ -108,7 +118,8 @@ class Rasteriser:
             for name, nbytes in sizes.items():
                 check_allocation(self.runtime.device, f"raster buffer '{name}' for "
                                  f"{width}x{height} pixels, K={self.K}", nbytes)
-            self._bufs = {"cam": cl.Buffer(ctx, mf.READ_ONLY, 16 * 4)}
+            self._bufs = {"cam": cl.Buffer(ctx, mf.READ_ONLY, 16 * 4),
+                          "ray_ab": cl.Buffer(ctx, mf.READ_ONLY, 4 * (width + height))}
             self._bufs.update({name: cl.Buffer(ctx, mf.READ_WRITE, max(nbytes, 4))
                                for name, nbytes in sizes.items()})
             self._size = (width, height)
@@ -144,16 +155,16 @@ class Rasteriser:
             cl.enqueue_copy(q, self._n_pairs, np.zeros(1, I32))
             ev_tris = self._run("ndrf_raster_tris", (max(self.n_faces, 1),), b["cam"], w, h,
                                 np.int32(self.n_faces), g["face_start"], g["faces"],
-                                g["vertices"], np.int32(self._capacity), self._n_pairs, pairs,
-                                *self._target(b, pass_))
+                                g["vertices"], b["ray_ab"], np.int32(self._capacity),
+                                self._n_pairs, pairs, *self._target(b, pass_))
             cl.enqueue_copy(q, count, self._n_pairs)
             if count[0] <= self._capacity:
                 break
             capacity = int(count[0])
         self.binned_pairs = int(count[0])
         ev_tiles = self._run("ndrf_raster_tiles", (max(int(count[0]), 1),), b["cam"], w, h,
-                             g["face_start"], g["faces"], g["vertices"], np.int32(count[0]),
-                             pairs, *self._target(b, pass_))
+                             g["face_start"], g["faces"], g["vertices"], b["ray_ab"],
+                             np.int32(count[0]), pairs, *self._target(b, pass_))
         return [ev_tris, ev_tiles]
 
     def rasterise(self, camera) -> tuple[dict, dict]:
@@ -167,6 +178,7 @@ class Rasteriser:
         w, h = camera.width, camera.height
         b, q = self._frame_buffers(w, h), self.runtime.queue
         cl.enqueue_copy(q, b["cam"], camera.packed())
+        cl.enqueue_copy(q, b["ray_ab"], pixel_ray_ab(camera))
         n = self.K * w * h
         events = [self._run("ndrf_raster_clear", (max(n, 1),), np.int32(n),
                             *self._target(b, 0))]
