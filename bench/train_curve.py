@@ -158,7 +158,8 @@ def _plot(points: list[dict], meta: dict) -> bytes:
                        label=f"{preset}: teacher")
     ax.set_xlabel("training wall-clock (min, evaluations excluded)")
     ax.set_ylabel("test PSNR (dB), baked model, OpenCL")
-    ax.set_title(f"{meta['method']}: {meta['row']}, {meta['scene']}, git "
+    row = f": {meta['row']}" if meta.get("row") else ""
+    ax.set_title(f"{points[0]['method']}{row}, {meta['scene']}, git "
                  f"{meta['git_revision']}, {meta['date'][:10]}\n{meta['device']}", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend()
@@ -175,7 +176,8 @@ def _cell(value, fmt: str = "{:.4f}") -> str:
 
 def write_curve(out_dir: Path, points: list[dict], meta: dict) -> str:
     """Write ``train-curve.csv`` and ``train-curve.png`` (atomically); returns a short
-    text table of the points. ``meta``: method, row, scene, git_revision, date, device."""
+    text table of the points. ``meta``: scene, git_revision, date, device (and the curve's
+    ``row`` name, for the plot's title)."""
     buf = io.StringIO()
     writer = csv.writer(buf)
     writer.writerow(COLUMNS)

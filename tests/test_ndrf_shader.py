@@ -227,7 +227,8 @@ def test_conv_pair_is_centred(kernel_size):
 
 @pytest.mark.parametrize("kernel_size", [2, 1])
 def test_reference_conv_matches_torch(kernel_size):
-    torch = pytest.importorskip("torch")
+    import torch                # a dependency of clrender (training): never skipped
+
     F = torch.nn.functional
     model = _model(2, kernel_size)
     rng = np.random.default_rng(5)
