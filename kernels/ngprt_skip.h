@@ -51,7 +51,7 @@ typedef struct {
     float s;
 } ngp_ray;
 
-/* Lattice point k (t_k = k * s) lies in `cell` at resolution res (ngp_point_u: the
+/* Lattice point k (t_k = k * s) lies in `cell` at resolution res (one lane: the
  * operations of v_point_u, bounded). */
 inline bool ngp_in_cell(const ngp_ray *r, int k, int res, int3 cell)
 {
