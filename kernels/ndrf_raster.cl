@@ -12,7 +12,9 @@
  * Olano & Greer 1997): with camera-space vertices v0, v1, v2 and the pixel ray
  * r = (a, b, -1) of kernels/camera.h, the edge functions E_ij = (v_i x v_j) . r all share
  * the sign of V = det(v0, v1, v2) exactly when the ray's line crosses the triangle in
- * front of the camera (t = V / (E_01 + E_12 + E_20) > 0). No near plane is needed: a
+ * front of the camera, at t = V / (n . r) > 0 with n = (v1 - v0) x (v2 - v0) (the sum of
+ * the three edge normals; V = n . v0). Each is computed without the cancellation of long
+ * vectors (edge_normal), so a small triangle far away keeps its edges and depth. No near plane is needed: a
  * triangle crossing the camera plane is neither dropped nor clipped, its pixels are those
  * Embree (tnear = 0) hits. A zero-area or edge-on triangle (V = 0) covers nothing.
  * Tie rule: a pixel centre on an edge (E = 0) is covered only where the edge's normal
@@ -22,7 +24,7 @@
  *
  * Depth test: per pixel and mesh a 64-bit key (depth bits << 32 | triangle), kept by
  * atom_min (cl_khr_int64_extended_atomics): the nearest triangle, the smaller id on a tie.
- * depth is the camera-space z distance V / E_sum (positive floats order as their bits).
+ * depth is the camera-space z distance V / (n . r) (positive floats order as their bits).
  * Without 64-bit atomics (ATOMICS64=0) two passes over the same triangles: pass 0 keeps
  * the least depth bits per pixel (atomic_min on uint), pass 1 the least id among the
  * triangles whose depth bits equal it; the same result.
@@ -59,8 +61,9 @@ typedef struct {
 
 /* A triangle in camera space, ready to test pixels. */
 typedef struct {
-    float c[9];            /* sign(V) (v1 x v2), sign(V) (v2 x v0), sign(V) (v0 x v1) */
-    float V;               /* |det(v0, v1, v2)| */
+    float c[9];            /* edge normals: sign(V) (v1 x v2), (v2 x v0), (v0 x v1) */
+    float n[3];            /* sign(V) (v1 - v0) x (v2 - v0) */
+    float V;               /* |det(v0, v1, v2)| = |n . v0| */
     int x0, y0, x1, y1;    /* inclusive pixel bounds, clamped to the image */
     int mesh, id;          /* mesh k and the face index within it */
 } Tri;
@@ -92,6 +95,19 @@ inline int2 pixel_range(float a, float b, int n)
     return (int2)((int)lo, (int)hi);
 }
 
+/* s (v_a x v_b) of camera-space vertices v[a], v[b] (global indices i[a], i[b]) into out,
+ * computed as v_lo x (v_hi - v_lo) from the vertex of the smaller index: the same value in
+ * exact arithmetic, but without the cancellation of two long vectors (a small triangle far
+ * from the eye), and, since both triangles of a shared edge compute the same product, still
+ * exactly negated between them. */
+inline void edge_normal(float v[3][3], const int *i, int a, int b, float s, float *out)
+{
+    const int lo = i[a] < i[b] ? a : b, hi = lo == a ? b : a;
+    float d[3];
+    for (int j = 0; j < 3; ++j) d[j] = v[hi][j] - v[lo][j];
+    cross_scaled(v[lo], d, lo == a ? s : -s, out);
+}
+
 /* Triangle g of the concatenated faces: its mesh, camera-space edge normals and bounds.
  * Returns 0 when it cannot cover a pixel (degenerate, behind the camera, off screen). */
 inline int tri_setup(int g, __global const float *cam, int width, int height,
@@ -102,16 +118,24 @@ inline int tri_setup(int g, __global const float *cam, int width, int height,
     while (k + 1 < K && g >= face_start[k + 1]) ++k;
     t->mesh = k;
     t->id = g - face_start[k];
-    float v[3][3];
-    for (int j = 0; j < 3; ++j) to_camera(cam, vertices + 3 * faces[3 * g + j], v[j]);
-    float n12[3];
-    cross_scaled(v[1], v[2], 1.0f, n12);
-    const float V = v[0][0] * n12[0] + v[0][1] * n12[1] + v[0][2] * n12[2];
+    float v[3][3], e1[3], e2[3], n[3];
+    int vi[3];
+    for (int j = 0; j < 3; ++j) {
+        vi[j] = faces[3 * g + j];
+        to_camera(cam, vertices + 3 * vi[j], v[j]);
+    }
+    for (int j = 0; j < 3; ++j) {
+        e1[j] = v[1][j] - v[0][j];
+        e2[j] = v[2][j] - v[0][j];
+    }
+    cross_scaled(e1, e2, 1.0f, n);
+    const float V = n[0] * v[0][0] + n[1] * v[0][1] + n[2] * v[0][2];
     if (!(V != 0.0f) || (v[0][2] >= 0.0f && v[1][2] >= 0.0f && v[2][2] >= 0.0f)) return 0;
     const float s = V > 0.0f ? 1.0f : -1.0f;
-    cross_scaled(v[1], v[2], s, t->c);
-    cross_scaled(v[2], v[0], s, t->c + 3);
-    cross_scaled(v[0], v[1], s, t->c + 6);
+    edge_normal(v, vi, 1, 2, s, t->c);
+    edge_normal(v, vi, 2, 0, s, t->c + 3);
+    edge_normal(v, vi, 0, 1, s, t->c + 6);
+    for (int j = 0; j < 3; ++j) t->n[j] = s * n[j];
     t->V = s * V;
     /* Camera looks down -z: depth -z. A vertex at or behind the camera plane: the covered
      * rays may lie anywhere on screen, bound by the image. */
@@ -163,8 +187,7 @@ inline void cover(__global const float *ray_ab, const Tri *t, const Target *tg, 
                   int y0, int x1, int y1)
 {
     __global const float *ray_b = ray_ab + tg->width;
-    const float nx = t->c[0] + t->c[3] + t->c[6], ny = t->c[1] + t->c[4] + t->c[7];
-    const float nz = t->c[2] + t->c[5] + t->c[8];
+    const float nx = t->n[0], ny = t->n[1], nz = t->n[2];
     for (int py = max(y0, t->y0); py <= min(y1, t->y1); ++py) {
         const float ry = ray_b[py];
         for (int px = max(x0, t->x0); px <= min(x1, t->x1); ++px) {

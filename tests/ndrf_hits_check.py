@@ -38,13 +38,15 @@ def compare(meshes, origins, dirs, a, b, edge_tol=1e-5, depth_rtol=1e-6) -> dict
     """Per mesh k, compare hits ``a`` and ``b`` (:class:`clrender.ndrf.hits.Hits`, (K, H, W))
     of rays ``origins``, ``dirs`` (H, W, 3).
 
-    Returns ``{"covered", "agree", "unexplained", "bary_err", "depth_rerr", "depth", "cos"}``:
-    pixels either covers, pixels with the same triangle, disagreements not explained, and for
-    each agreeing hit the larger |a - b| of (u, v), the relative depth difference, ``b``'s
-    depth and the |cos| of the hit (to weigh the errors by).
+    Returns ``{"covered", "agree", "unexplained", "bary_err", "depth_rerr", "depth", "cos",
+    "kappa"}``: pixels either covers, pixels with the same triangle, disagreements not
+    explained, and for each agreeing hit the larger |a - b| of (u, v), the relative depth
+    difference, ``b``'s depth, the |cos| of the hit and its condition number
+    |origin - p0| / (h |cos|), h the triangle's smallest height: float32 rounding of the
+    ray's origin moves the barycentrics by about eps x that.
     """
     out = {"covered": 0, "agree": 0, "unexplained": 0, "bary_err": [], "depth_rerr": [],
-           "depth": [], "cos": []}
+           "depth": [], "cos": [], "kappa": []}
     o, d = origins.reshape(-1, 3), dirs.reshape(-1, 3)
     for k, (vertices, faces) in enumerate(meshes):
         ta, tb = a.tri[k].reshape(-1), b.tri[k].reshape(-1)
@@ -55,6 +57,13 @@ def compare(meshes, origins, dirs, a, b, edge_tol=1e-5, depth_rtol=1e-6) -> dict
         if same.any():
             p = np.asarray(vertices)[np.asarray(faces)[ta[same]]]
             _, _, cos = ray_triangle64(o[same], d[same], p)
+            p64 = p.astype(F64)
+            edges = np.stack([p64[:, 1] - p64[:, 0], p64[:, 2] - p64[:, 1],
+                              p64[:, 0] - p64[:, 2]], 1)
+            twice_area = np.linalg.norm(np.cross(edges[:, 0], -edges[:, 2]), axis=1)
+            size = twice_area / np.linalg.norm(edges, axis=2).max(1)       # smallest height
+            out["kappa"].append(np.linalg.norm(o[same] - p64[:, 0], axis=1)
+                                / np.maximum(size * cos, 1e-30))
             out["bary_err"].append(np.abs(a.bary[k].reshape(-1, 2)[same]
                                           - b.bary[k].reshape(-1, 2)[same]).max(1))
             da, db = a.depth[k].reshape(-1)[same], b.depth[k].reshape(-1)[same]
@@ -64,7 +73,7 @@ def compare(meshes, origins, dirs, a, b, edge_tol=1e-5, depth_rtol=1e-6) -> dict
         for i in np.flatnonzero(cov & (ta != tb)):
             out["unexplained"] += not _explained(vertices, faces, o[i], d[i], ta[i], tb[i],
                                                  edge_tol, depth_rtol)
-    for key in ("bary_err", "depth_rerr", "depth", "cos"):
+    for key in ("bary_err", "depth_rerr", "depth", "cos", "kappa"):
         out[key] = np.concatenate(out[key]) if out[key] else np.zeros(0)
     return out
 

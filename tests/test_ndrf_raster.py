@@ -9,8 +9,11 @@ Tolerances (stated, not tuned; tests/ndrf_hits_check.py says what "explained" me
 - where the triangles agree: barycentrics within 1e-4 and depth within 1e-5 relative for
   rays meeting the triangle at |cos| >= 0.1; at grazing angles, where the float32 ray itself
   moves the hit (both paths differ from the float64 hit by up to ~5e-4), within those
-  bounds times 0.1 / |cos|; depth also within 1e-7 |origin| absolute (float32 cannot place
-  a hit more finely than the rounding of origin - vertex: a camera 1e-4 off the surface);
+  bounds times 0.1 / |cos|; barycentrics also within 4 eps32 |origin - p0| / (h |cos|), h
+  the triangle's smallest height (a small or thin triangle far from the camera: the float32 origin's rounding moves the
+  hit by about that on either path); depth also within 1e-7 |origin| absolute (float32
+  cannot place a hit more finely than the rounding of origin - vertex: a camera 1e-4 off
+  the surface);
 - rendered images: >= 50 dB PSNR between the raster and the Embree path (random and
   trained models); the shader's exact build within 1e-5 of the numpy reference on raster hits.
 Both depth tests run: 64-bit atomics and the two-pass 32-bit fallback (same results).
@@ -67,7 +70,8 @@ def _check_hits(meshes, camera, raster_hits, embree_hits, strict_agreement=True)
     if strict_agreement:
         assert s["agree"] >= AGREE * s["covered"], (s["agree"], s["covered"])
     scale = np.maximum(1.0, GOOD_COS / np.maximum(s["cos"], 1e-6))
-    assert np.all(s["bary_err"] <= BARY_TOL * scale), s["bary_err"].max()
+    float32 = 4 * np.finfo(np.float32).eps * s["kappa"]
+    assert np.all(s["bary_err"] <= np.maximum(BARY_TOL * scale, float32)), s["bary_err"].max()
     origin = float(np.abs(o[0, 0]).max())
     assert np.all(s["depth_rerr"] <= DEPTH_RTOL * scale + 1e-7 * origin / s["depth"]), \
         s["depth_rerr"].max()
