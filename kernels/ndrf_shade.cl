@@ -112,14 +112,22 @@ inline int ndrf_covered(const Frame *f, int p)
  * >= 50 dB against the exact build allows). */
 inline void ndrf_view_encoding(float3 d, float *v)
 {
+    /* Through private arrays: swizzles and float4 literals here crash the --uninitialized
+     * plugin of Oclgrind 21.10. */
+    float a[4], s[4], c[4];
     vstore3(d, 0, v);
-    float4 s = native_sin((float4)(d, 0.0f)), c = native_cos((float4)(d, 0.0f));
+    vstore3(d, 0, a);
+    a[3] = 0.0f;
+    vstore4(native_sin(vload4(0, a)), 0, s);
+    vstore4(native_cos(vload4(0, a)), 0, c);
     for (int i = 0; i < N_FREQ; ++i) {
-        vstore3(s.xyz, 0, v + 3 + 6 * i);
-        vstore3(c.xyz, 0, v + 6 + 6 * i);
-        const float4 s2 = 2.0f * s * c;
-        c = 1.0f - 2.0f * s * s;
-        s = s2;
+        for (int j = 0; j < 3; ++j) {
+            v[3 + 6 * i + j] = s[j];
+            v[6 + 6 * i + j] = c[j];
+            const float s2 = 2.0f * s[j] * c[j];
+            c[j] = 1.0f - 2.0f * s[j] * s[j];
+            s[j] = s2;
+        }
     }
 }
 #else

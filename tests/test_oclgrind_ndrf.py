@@ -34,8 +34,8 @@ for atomics64 in (True, False):
         hits = keep[-1].hits(camera)
         print("RASTER", atomics64, name, int((hits.tri >= 0).sum()), keep[-1].binned_pairs,
               flush=True)
-hits = Rasteriser(model).hits(views["border"])
-keep.append(hits)
+keep.append(Rasteriser(model))
+hits = keep[-1].hits(views["border"])
 # Both conv0 organisations: one pixel per work-item (GPUs) and 8 per work-item (CPUs,
 # gathering past the image's right edge).
 for layout in ({"H_VEC": 8, "ACCUMULATORS": 0, "SEG": 1},
