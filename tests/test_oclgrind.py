@@ -36,6 +36,8 @@ from pathlib import Path
 
 import pytest
 
+from deps import require
+
 SCRIPT = """
 import hashlib
 
@@ -97,9 +99,8 @@ def _oclgrind(script: str) -> tuple[subprocess.CompletedProcess, str, list[str]]
 
 
 @pytest.mark.oclgrind
-@pytest.mark.skipif(shutil.which("oclgrind") is None,
-                    reason="the oclgrind executable is not on PATH (apt install oclgrind)")
 def test_kernels_clean_under_oclgrind():
+    require(shutil.which("oclgrind") is not None, "oclgrind (apt install oclgrind)")
     proc, log, errors = _oclgrind(SCRIPT)
     assert proc.returncode == 0, f"oclgrind run failed ({proc.returncode}):\n{log[-4000:]}"
     assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])

@@ -13,6 +13,7 @@ import shutil
 
 import pytest
 
+from deps import require
 from test_oclgrind import _oclgrind
 
 SCRIPT = """
@@ -61,9 +62,8 @@ except ValueError as e:
 
 
 @pytest.mark.oclgrind
-@pytest.mark.skipif(shutil.which("oclgrind") is None,
-                    reason="the oclgrind executable is not on PATH (apt install oclgrind)")
 def test_ndrf_kernels_clean_under_oclgrind():
+    require(shutil.which("oclgrind") is not None, "oclgrind (apt install oclgrind)")
     proc, log, errors = _oclgrind(SCRIPT)
     assert proc.returncode == 0, f"oclgrind run failed ({proc.returncode}):\n{log[-4000:]}"
     assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])
