@@ -138,7 +138,7 @@ class Shader:
         hidden layer (its padding zeroed here, never written by the passes; layout in
         kernels/ndrf_shade.cl), the image and, once hits are uploaded, their buffers."""
         if self._size != (width, height):
-            ctx, q, mf = self.runtime.context, self.runtime.queue, cl.mem_flags
+            ctx, mf = self.runtime.context, cl.mem_flags
             d, n = self.defines, width * height
             r = d["KSIZE"] - 1
             hidden_floats = (height + r) * (width + r) * d["H_STRIDE"]
