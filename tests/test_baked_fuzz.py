@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clrender.ngprt.baked import BakedFormatError, load_baked, save_baked
+from clrender.ngprt.baked import load_baked, save_baked
 from clrender.ngprt.config import ModelConfig, preset
 from clrender.ngprt.random_model import random_baked_model
 
@@ -140,34 +140,43 @@ def _mutants(base, tmp: Path):
     yield "no gamma", _write(out(), {k: v for k, v in manifest.items() if k != "gamma"}, arrays)
     for label, man, arr in _array_mutants(manifest, arrays):
         yield label, _write(out(), man, arr)
+    yield from byte_mutants(data, out)
+
+
+def byte_mutants(data: bytes, new_path):
+    """(label, path) of ``data`` (a valid file's bytes) truncated and with bytes flipped,
+    each written to a fresh ``new_path()``."""
     for cut in (0, 1, 22, 100, len(data) // 4, len(data) // 2, len(data) - 30, len(data) - 1):
-        path = out()
+        path = new_path()
         path.write_bytes(data[:cut])
         yield f"truncated to {cut} bytes", path
     rng = np.random.default_rng(0)
     # Zip headers at both ends (local header, central directory, end record) and data.
     for pos in [0, 4, 8, 18, 26, 30, len(data) - 22, len(data) - 12, len(data) - 6,
                 len(data) - 60] + list(rng.integers(0, len(data), 8)):
-        path, flipped = out(), bytearray(data)
+        path, flipped = new_path(), bytearray(data)
         flipped[pos] ^= 0x5A
         path.write_bytes(bytes(flipped))
         yield f"byte {pos} flipped", path
 
 
-@pytest.fixture(scope="module")
-def outcomes(base, tmp_path_factory):
-    """[(label, path, error or None)] for every mutant."""
-    tmp = tmp_path_factory.mktemp("mutants")
+def load_outcomes(mutants, load) -> list:
+    """[(label, path, error or None)]: each (label, path) of ``mutants`` loaded by ``load``;
+    any exception is kept, to be judged by the test."""
     out = []
-    for label, path in _mutants(base, tmp):
+    for label, path in mutants:
         try:
-            load_baked(path)
+            load(path)
             out.append((label, path, None))
-        except BakedFormatError as e:
-            out.append((label, path, e))
         except Exception as e:          # noqa: BLE001 - anything else is a finding
             out.append((label, path, e))
     return out
+
+
+@pytest.fixture(scope="module")
+def outcomes(base, tmp_path_factory):
+    """[(label, path, error or None)] for every mutant."""
+    return load_outcomes(_mutants(base, tmp_path_factory.mktemp("mutants")), load_baked)
 
 
 def test_every_mutant_is_refused_clearly_or_loads(outcomes):

@@ -23,7 +23,8 @@ import pytest
 from clrender.ndrf.baked import BakedFormatError, load_baked, save_baked
 from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.random_model import random_ndrf_model
-from test_baked_fuzz import ANY_VALUE, _array_variants, _show, _write
+from test_baked_fuzz import (ANY_VALUE, _array_variants, _show, _write, byte_mutants,
+                             load_outcomes)
 
 RENDER_TIMEOUT_S = 150
 VALID_VALUE = {"thresholds": [[1e-4], [1e-4, 1e-3, 1e-2], [1e-2, 1e-4], [0.5, 0.5], [],
@@ -78,31 +79,13 @@ def _mutants(base, tmp: Path):
         yield label, _write(next(paths), man, arrays)
     for label, arr in _array_mutants(arrays):
         yield label, _write(next(paths), manifest, arr)
-    for cut in (0, 1, 22, 100, len(data) // 4, len(data) // 2, len(data) - 30, len(data) - 1):
-        path = next(paths)
-        path.write_bytes(data[:cut])
-        yield f"truncated to {cut} bytes", path
-    rng = np.random.default_rng(0)
-    for pos in [0, 4, 8, 18, 26, 30, len(data) - 22, len(data) - 12, len(data) - 6,
-                len(data) - 60] + list(rng.integers(0, len(data), 8)):
-        path, flipped = next(paths), bytearray(data)
-        flipped[pos] ^= 0x5A
-        path.write_bytes(bytes(flipped))
-        yield f"byte {pos} flipped", path
+    yield from byte_mutants(data, lambda: next(paths))
 
 
 @pytest.fixture(scope="module")
 def outcomes(base, tmp_path_factory):
     """[(label, path, error or None)] for every mutant."""
-    tmp = tmp_path_factory.mktemp("mutants")
-    out = []
-    for label, path in _mutants(base, tmp):
-        try:
-            load_baked(path)
-            out.append((label, path, None))
-        except Exception as e:          # noqa: BLE001 - judged below
-            out.append((label, path, e))
-    return out
+    return load_outcomes(_mutants(base, tmp_path_factory.mktemp("mutants")), load_baked)
 
 
 def test_every_mutant_is_refused_clearly_or_loads(outcomes):
