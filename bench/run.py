@@ -26,6 +26,7 @@ from tqdm import tqdm
 
 from bench import ablation, cache, report, seeds, train_curve
 from clrender import methods
+from clrender.cliopts import whole_number
 
 
 def _git_revision() -> str:
@@ -62,17 +63,6 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict) -> str:
     return report.write_table(args.out, table, results, meta)
 
 
-def _seed_count(text: str) -> int:
-    """--seeds: a whole number >= 1."""
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number of seeds >= 1, got {text!r}")
-    return n
-
-
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m bench.run", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -98,7 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cache", type=Path, default=None, help="model/scene cache folder")
     p.add_argument("--repeats", type=int, default=5, help="timing passes per row")
     p.add_argument("--seed", type=int, default=0, help="training seed (the first one)")
-    p.add_argument("--seeds", type=_seed_count, default=1,
+    p.add_argument("--seeds", type=whole_number("seeds"), default=1,
                    help="train and measure every row for seeds SEED..SEED+N-1 and report "
                         "mean ± std (default 1)")
     return p

@@ -50,19 +50,9 @@ def _cmd_data_check(args) -> int:
     return 0
 
 
-def _downscale(text: str) -> int:
-    """--downscale: a whole number >= 1."""
-    try:
-        n = int(text)
-    except ValueError:
-        n = 0
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
-    return n
-
-
 def _add_downscale(parser, default, help_default: str) -> None:
-    parser.add_argument("--downscale", type=_downscale, default=default, metavar="N",
+    parser.add_argument("--downscale", type=cliopts.whole_number(), default=default,
+                        metavar="N",
                         help="read the dataset's images_N/ (LLFF, Mip-NeRF 360, COLMAP, "
                              f"nerfstudio), else shrink its images N times ({help_default})")
 

@@ -83,3 +83,18 @@ def chosen(args: argparse.Namespace, kind: str, method: str) -> dict:
     if missing:
         raise ValueError(f"--method {method} needs {', '.join(missing)}")
     return {flags[f][method]: v for f, v in given.items()}
+
+
+def whole_number(of: str = ""):
+    """An argparse type: a whole number >= 1 (``of``: what it counts, for the message)."""
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            n = 0
+        if n < 1:
+            raise argparse.ArgumentTypeError(
+                f"expected a whole number{' of ' + of if of else ''} >= 1, got {text!r}")
+        return n
+
+    return parse
