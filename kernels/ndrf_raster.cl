@@ -2,8 +2,9 @@
  * clrender/ndrf/hits.py, which the tests hold it to:
  *   ndrf_raster_clear  every pixel of every mesh: no hit yet.
  *   ndrf_raster_tris   per triangle (all K meshes, faces concatenated): to camera space,
- *                      screen bounding box; a box of at most TILE x TILE pixels is covered
- *                      here, a larger one is binned as (triangle, screen tile) pairs.
+ *                      screen bounding box; a box of at most TILE^2 pixels is covered
+ *                      here, row by row over the span its edges allow (row_span), a larger
+ *                      one is binned as (triangle, TILE x TILE screen tile) pairs.
  *   ndrf_raster_tiles  per binned pair: the triangle over the tile's pixels.
  *   ndrf_resolve       per pixel and mesh: triangle id, Embree (u, v) and depth along the
  *                      unit ray, recomputed from the pixel ray and the triangle.
@@ -158,13 +159,11 @@ inline int tri_setup(int g, __global const float *cam, int width, int height,
     return t->x0 <= t->x1 && t->y0 <= t->y1;
 }
 
-/* The edge c (3 floats) covers the pixel ray r = (rx, ry, -1): E = c . r > 0, or E == 0 on a
- * lexicographically positive c. */
-inline int edge_covers(const float *c, float rx, float ry)
+/* Whether a pixel centre exactly on edge c (3 floats, E = 0) counts as covered: c
+ * lexicographically positive (the tie rule). */
+inline int edge_owns_ties(const float *c)
 {
-    const float e = c[0] * rx + c[1] * ry - c[2];
-    return e > 0.0f || (e == 0.0f && (c[0] > 0.0f || (c[0] == 0.0f && (c[1] > 0.0f ||
-                                      (c[1] == 0.0f && c[2] > 0.0f)))));
+    return c[0] > 0.0f || (c[0] == 0.0f && (c[1] > 0.0f || (c[1] == 0.0f && c[2] > 0.0f)));
 }
 
 inline void write_hit(const Target *tg, int k, int p, float depth, int id)
@@ -179,24 +178,59 @@ inline void write_hit(const Target *tg, int k, int p, float depth, int id)
 #endif
 }
 
-/* Cover the pixels of [x0, x1] x [y0, y1] (within the triangle's bounds) that t covers.
+/* The columns [*lo, *hi] of [x0, x1] where, on a row, all three edge functions of t may be
+ * >= 0, one pixel of slack either side (*lo > *hi: none). On the row of ray b = ry the edge
+ * function E = c0 a + rest, rest = c1 ry - c2, is linear in the pixel ray's
+ * a = (px + 0.5 - cx) / fx and changes sign once, at a = -rest / c0; the exact edge tests
+ * then run on this span only, not on the whole box. Two triangles sharing an edge compute
+ * exactly negated c and rest, hence the same crossing: their spans overlap by the slack. */
+inline void row_span(const Tri *t, const float *rest, float fx, float cx, int x0, int x1,
+                     int *lo, int *hi)
+{
+    float a_lo = -INFINITY, a_hi = INFINITY;
+    for (int e = 0; e < 3; ++e) {
+        const float c0 = t->c[3 * e];
+        if (c0 > 0.0f) a_lo = fmax(a_lo, -rest[e] / c0);
+        else if (c0 < 0.0f) a_hi = fmin(a_hi, -rest[e] / c0);
+        else if (rest[e] < 0.0f) a_hi = -INFINITY;
+    }
+    /* a to pixel columns, clamped as floats first (a may be +-inf). */
+    const float l = fmax(floor(fmax(a_lo * fx + cx, (float)x0) - 0.5f) - 1.0f, (float)x0);
+    const float h = fmin(ceil(fmin(a_hi * fx + cx, (float)x1 + 1.0f) - 0.5f) + 1.0f,
+                         (float)x1);
+    *lo = (int)l;
+    *hi = a_lo <= a_hi ? (int)h : (int)l - 1;
+}
+
+/* Cover the pixels of [x0, x1] x [y0, y1] (within the triangle's bounds) that t covers:
+ * every edge function E = c0 rx + (c1 ry - c2) > 0, or = 0 on an edge that owns its ties
+ * (a fixed evaluation order: a shared edge's E is exactly negated in its other triangle).
  * ray_ab: the pixel rays' a (width floats, then b: height floats) of kernels/camera.h,
  * (px + 0.5 - cx) / fx and -((py + 0.5 - cy) / fy), computed once a frame on the host
- * with the same float32 operations (clrender/ndrf/raster_cl.py). */
-inline void cover(__global const float *ray_ab, const Tri *t, const Target *tg, int x0,
-                  int y0, int x1, int y1)
+ * with the same float32 operations (clrender/ndrf/raster_cl.py); fx, cx: the camera's. */
+inline void cover(__global const float *ray_ab, float fx, float cx, const Tri *t,
+                  const Target *tg, int x0, int y0, int x1, int y1)
 {
     __global const float *ray_b = ray_ab + tg->width;
-    const float nx = t->n[0], ny = t->n[1], nz = t->n[2];
+    const float c00 = t->c[0], c10 = t->c[3], c20 = t->c[6], nx = t->n[0];
+    const int own0 = edge_owns_ties(t->c), own1 = edge_owns_ties(t->c + 3),
+              own2 = edge_owns_ties(t->c + 6);
+    x0 = max(x0, t->x0);
+    x1 = min(x1, t->x1);
     for (int py = max(y0, t->y0); py <= min(y1, t->y1); ++py) {
         const float ry = ray_b[py];
-        for (int px = max(x0, t->x0); px <= min(x1, t->x1); ++px) {
+        float rest[3];
+        for (int e = 0; e < 3; ++e) rest[e] = t->c[3 * e + 1] * ry - t->c[3 * e + 2];
+        const float rest_n = t->n[1] * ry - t->n[2];
+        int lo, hi;
+        row_span(t, rest, fx, cx, x0, x1, &lo, &hi);
+        for (int px = lo; px <= hi; ++px) {
             const float rx = ray_ab[px];
-            if (!edge_covers(t->c, rx, ry) || !edge_covers(t->c + 3, rx, ry) ||
-                !edge_covers(t->c + 6, rx, ry))
-                continue;
-            const float e = nx * rx + ny * ry - nz;
-            if (e > 0.0f) write_hit(tg, t->mesh, py * tg->width + px, t->V / e, t->id);
+            const float e0 = c00 * rx + rest[0], e1 = c10 * rx + rest[1],
+                        e2 = c20 * rx + rest[2], en = nx * rx + rest_n;
+            if ((e0 > 0.0f || (e0 == 0.0f && own0)) && (e1 > 0.0f || (e1 == 0.0f && own1)) &&
+                (e2 > 0.0f || (e2 == 0.0f && own2)) && en > 0.0f)
+                write_hit(tg, t->mesh, py * tg->width + px, t->V / en, t->id);
         }
     }
 }
@@ -234,8 +268,8 @@ __kernel void ndrf_raster_tris(__global const float *cam, const int width, const
     Tri t;
     if (!tri_setup(g, cam, width, height, face_start, faces, vertices, &t)) return;
     const Target tg = TARGET_INIT;
-    if (t.x1 - t.x0 < TILE && t.y1 - t.y0 < TILE) {
-        cover(ray_ab, &t, &tg, t.x0, t.y0, t.x1, t.y1);
+    if ((t.x1 - t.x0 + 1) * (t.y1 - t.y0 + 1) <= TILE * TILE) {
+        cover(ray_ab, cam[0], cam[2], &t, &tg, t.x0, t.y0, t.x1, t.y1);
         return;
     }
     const int tx0 = t.x0 / TILE, tx1 = t.x1 / TILE, ty0 = t.y0 / TILE, ty1 = t.y1 / TILE;
@@ -265,7 +299,7 @@ __kernel void ndrf_raster_tiles(__global const float *cam, const int width, cons
     const int tiles_x = (width + TILE - 1) / TILE;
     const int row = pair.y / tiles_x;                   /* no %: see ndrf_raster_tris */
     const int x0 = (pair.y - row * tiles_x) * TILE, y0 = row * TILE;
-    cover(ray_ab, &t, &tg, x0, y0, x0 + TILE - 1, y0 + TILE - 1);
+    cover(ray_ab, cam[0], cam[2], &t, &tg, x0, y0, x0 + TILE - 1, y0 + TILE - 1);
 }
 
 inline float dot3(const float *a, const float *b)
@@ -291,7 +325,7 @@ __kernel void ndrf_resolve(__global const float *cam, const int width, const int
     const int n = width * height;
     float o[3], d[3];
     vstore3(camera_ray_origin(cam), 0, o);
-    vstore3(camera_ray_dir(cam, px, py), 0, d);
+    camera_ray_dir_into(cam, px, py, d);
     for (int k = 0; k < K; ++k) {
         const int idx = k * n + py * width + px;
 #if ATOMICS64
@@ -312,10 +346,10 @@ __kernel void ndrf_resolve(__global const float *cam, const int width, const int
             }
             cross_scaled(d, e2, 1.0f, pv);
             cross_scaled(tv, e1, 1.0f, qv);
-            const float det = dot3(e1, pv);
-            u = clamp(dot3(tv, pv) / det, 0.0f, 1.0f);
-            v = clamp(dot3(d, qv) / det, 0.0f, 1.0f - u);
-            t = dot3(e2, qv) / det;
+            const float inv_det = 1.0f / dot3(e1, pv);
+            u = clamp(dot3(tv, pv) * inv_det, 0.0f, 1.0f);
+            v = clamp(dot3(d, qv) * inv_det, 0.0f, 1.0f - u);
+            t = dot3(e2, qv) * inv_det;
         }
         tri[idx] = id;
         bary[2 * idx] = u;

@@ -1,14 +1,17 @@
 /* NDRF shading (docs/ndrf.md), two pixel-parallel passes, one per conv layer as in the
  * paper's WebGL shader; mirrors clrender/ndrf/shader_ref.py:
  *   ndrf_conv0   KSIZE x KSIZE conv C_IN -> HIDDEN, ReLU -> hidden, over the screen pixels
- *                (x..x+PAD, y..y+PAD) (padding bottom/right). The screen pixels are gathered
- *                on the fly into private memory (ndrf_screen_pixel): for each mesh k the
- *                barycentric gather of features_k and of the hit position (zeros on a miss),
- *                then the view encoding of the camera ray (camera.h); zeros outside the
- *                image. No screen buffer travels through global memory.
+ *                (x..x+PAD, y..y+PAD) (padding bottom/right), factored by linearity (see
+ *                the kernel): a hit's 11 geometry channels per mesh enter as the
+ *                barycentric blend of per-vertex projections, the view channels as their
+ *                weighted encoding (exact build) or a tabulated 1D function of each
+ *                direction component, linearly interpolated (fast build). No screen buffer
+ *                travels through global memory.
  *   ndrf_conv1   KSIZE x KSIZE conv HIDDEN -> 3 over hidden (x-PAD..x, y-PAD..y) (padding
  *                top/left), sigmoid, composited on the background by coverage.
- *   ndrf_screen  the screen buffer itself (tests only: the gather against the reference).
+ *   ndrf_screen  the screen buffer itself (tests only: the gather against the reference):
+ *                for each mesh k the barycentric gather of features_k and of the hit
+ *                position (zeros on a miss), the view encoding; zeros outside the image.
  * (PAD = KSIZE - 1.) Only what a covered pixel's colour depends on is computed: conv1 runs on
  * covered pixels, conv0 where a covered pixel reads its output. A pixel is covered where any
  * mesh's tri >= 0. Uncovered pixels show the background whatever the shader computes there.
@@ -21,15 +24,16 @@
  *
  * -D defines (clrender/ndrf/shader_cl.py:kernel_defines): from NDRFConfig K, FEATURES,
  * C_IN, HIDDEN, N_FREQ, KSIZE; for the device H_VEC (8 or 16: floats per hidden-channel
- * vector), H_BLOCK (vectors per block of outputs kept in registers), H_STRIDE (HIDDEN
- * rounded up to whole blocks), PIX (adjacent pixels whose outputs conv0 accumulates at once)
- * and SEG (adjacent pixels per conv0 work-item, a multiple of PIX); FAST_MATH
- * (the view encoding by double-angle identities, native exp). Weights, zero-padded to H_STRIDE:
- *   w0 (KSIZE*KSIZE, C_IN, H_STRIDE) [tap, in, out], b0 (H_STRIDE),
+ * vector), H_STRIDE (HIDDEN rounded up to whole vectors), SEG x ROWS (the block of
+ * outputs of a conv0 work-item); VIEW_NODES (the fast build's table nodes); FAST_MATH
+ * (the view table, native exp). Weights (clrender/ndrf/shader_cl.py:packed_weights),
+ * zero-padded to H_STRIDE:
+ *   proj (sum V_k, KSIZE*KSIZE, H_STRIDE) per-vertex projections, b0 (H_STRIDE),
+ *   w_view (KSIZE*KSIZE, VIEW_C, H_STRIDE) [tap, in, out] (exact build) or the table
+ *   (3, KSIZE*KSIZE, VIEW_NODES, H_STRIDE) (fast build),
  *   w1 (KSIZE*KSIZE, 3, H_STRIDE) [tap, out, in], b1 (3).
- * Speed: conv0 vectorises across output channels; each weight vector, loaded once per
- * block, serves PIX pixels; a work-item gathers the (SEG + PAD) x KSIZE screen pixels of its
- * SEG outputs once.
+ * Speed: conv0 vectorises across output channels; a work-item prepares the
+ * (SEG + PAD) x (ROWS + PAD) input pixels of its block once (hits, ray direction).
  * Plain a * b + c: mad()/fma() are several times slower on PoCL (DESIGN.md, performance
  * notes).
  */
@@ -37,12 +41,9 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 #if !defined(K) || !defined(FEATURES) || !defined(C_IN) || !defined(HIDDEN) || \
-    !defined(N_FREQ) || !defined(KSIZE) || !defined(H_VEC) || !defined(H_BLOCK) || \
-    !defined(H_STRIDE) || !defined(PIX) || !defined(SEG) || !defined(FAST_MATH)
-#error "ndrf_shade.cl needs -D K FEATURES C_IN HIDDEN N_FREQ KSIZE H_VEC H_BLOCK H_STRIDE PIX SEG FAST_MATH"
-#endif
-#if SEG % PIX != 0
-#error "SEG must be a multiple of PIX"
+    !defined(N_FREQ) || !defined(KSIZE) || !defined(H_VEC) || !defined(H_STRIDE) || \
+    !defined(SEG) || !defined(ROWS) || !defined(VIEW_NODES) || !defined(FAST_MATH)
+#error "ndrf_shade.cl needs -D K FEATURES C_IN HIDDEN N_FREQ KSIZE H_VEC H_STRIDE SEG ROWS VIEW_NODES FAST_MATH"
 #endif
 #if FEATURES != 8
 #error "the gather reads the per-vertex features as float8"
@@ -50,8 +51,8 @@
 #if C_IN != (FEATURES + 3) * K + 3 + 6 * N_FREQ
 #error "C_IN must be 8K features + 3K positions + 3 + 6 N_FREQ view channels"
 #endif
-#if H_STRIDE < HIDDEN || H_STRIDE % (H_VEC * H_BLOCK) != 0
-#error "H_STRIDE must be a multiple of H_VEC * H_BLOCK no smaller than HIDDEN"
+#if H_STRIDE < HIDDEN || H_STRIDE % H_VEC != 0
+#error "H_STRIDE must be a multiple of H_VEC no smaller than HIDDEN"
 #endif
 
 #if H_VEC == 8
@@ -73,6 +74,8 @@ typedef float16 hvec;
 #endif
 
 #define PAD (KSIZE - 1)
+#define TAPS (KSIZE * KSIZE)
+#define VIEW_C (3 + 6 * N_FREQ)
 #define VIEW_OFF ((FEATURES + 3) * K)
 
 /* The hits of one frame and the meshes they index. */
@@ -105,32 +108,6 @@ inline int ndrf_covered(const Frame *f, int p)
     return 0;
 }
 
-#if FAST_MATH
-/* d, then sin(2^i d), cos(2^i d) for i < N_FREQ by the double-angle identities from one
- * sin/cos of d: sin 2a = 2 sin a cos a, cos 2a = 1 - 2 sin^2 a (the fast build; each
- * doubling doubles the angle's rounding error, ~1e-6 after four, far below what the
- * >= 50 dB against the exact build allows). */
-inline void ndrf_view_encoding(float3 d, float *v)
-{
-    /* Through private arrays: swizzles and float4 literals here crash the --uninitialized
-     * plugin of Oclgrind 21.10. */
-    float a[4], s[4], c[4];
-    vstore3(d, 0, v);
-    vstore3(d, 0, a);
-    a[3] = 0.0f;
-    vstore4(native_sin(vload4(0, a)), 0, s);
-    vstore4(native_cos(vload4(0, a)), 0, c);
-    for (int i = 0; i < N_FREQ; ++i) {
-        for (int j = 0; j < 3; ++j) {
-            v[3 + 6 * i + j] = s[j];
-            v[6 + 6 * i + j] = c[j];
-            const float s2 = 2.0f * s[j] * c[j];
-            c[j] = 1.0f - 2.0f * s[j] * s[j];
-            s[j] = s2;
-        }
-    }
-}
-#else
 /* d, then sin(2^i d), cos(2^i d) for i < N_FREQ (2^i d: exact scaling, as in the
  * reference), five frequencies at a time: one float16 call vectorises where a scalar call
  * per channel does not (PoCL: ~30x faster). sincos() would save a little more but breaks
@@ -155,7 +132,6 @@ inline void ndrf_view_encoding(float3 d, float *v)
         }
     }
 }
-#endif
 
 /* The C_IN screen channels of pixel (px, py) into out; all zeros outside the image. */
 inline void ndrf_screen_pixel(const Frame *f, int px, int py, float *out)
@@ -204,11 +180,11 @@ __kernel void ndrf_screen(FRAME_ARGS, __global float *screen)
     for (int c = 0; c < C_IN; ++c) screen[(size_t)(py * width + px) * C_IN + c] = out[c];
 }
 
-/* Whether conv1 reads hidden at any of pixels (x0..x0+SEG-1, y0) for a covered pixel: the
- * readers of (x, y) are (x..x+PAD, y..y+PAD). */
-inline int ndrf_hidden_needed(const Frame *f, int x0, int y0)
+/* Whether any pixel of columns x0..x0+nx-1, rows y0..y0+ny-1 (clipped to the image) is
+ * covered. */
+inline int ndrf_any_covered(const Frame *f, int x0, int y0, int nx, int ny)
 {
-    const int x1 = min(x0 + SEG + PAD, f->width), y1 = min(y0 + KSIZE, f->height);
+    const int x1 = min(x0 + nx, f->width), y1 = min(y0 + ny, f->height);
     for (int y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x)
             if (ndrf_covered(f, y * f->width + x)) return 1;
@@ -220,39 +196,121 @@ inline hvec ndrf_relu(hvec x)
     return x > 0.0f ? x : (hvec)(0.0f);
 }
 
-__kernel void ndrf_conv0(FRAME_ARGS, __global const float *w0, __global const float *b0,
-                         __global float *hidden)
+/* What conv0 needs of screen pixel (px, py), for the KSIZE x KSIZE taps it feeds:
+ * vi[3k + e] the vertices (concatenated numbering) of its hit on mesh k, -1 on a miss or
+ * outside the image, vw[3k + e] their barycentric weights (1-u-v, u, v); the view encoding
+ * (exact build: the VIEW_C channels) or its table lookups (fast build: node and fraction per
+ * direction component), untouched outside the image (*inside = 0). */
+inline void ndrf_conv0_pixel(const Frame *f, int px, int py, int *inside, int *vi, float *vw,
+                             float *view, int *node, float *frac)
 {
-    const int x0 = (int)get_global_id(0) * SEG, py = (int)get_global_id(1);
-    if (x0 >= width || py >= height) return;
+    *inside = px < f->width && py < f->height;
+    for (int e = 0; e < 3 * K; ++e) {
+        vi[e] = -1;
+        vw[e] = 0.0f;
+    }
+    if (!*inside) return;
+    const int n = f->width * f->height, p = py * f->width + px;
+    for (int k = 0; k < K; ++k) {
+        const int t = f->tri[k * n + p];
+        /* Hits index faces of mesh k (the host checks uploaded ones); the bound here only
+         * keeps reads inside the buffers. */
+        if (t >= 0 && t < f->face_start[k + 1] - f->face_start[k]) {
+            const int3 i = vload3(f->face_start[k] + t, f->faces);
+            const float2 uv = vload2(k * n + p, f->bary);
+            vi[3 * k] = i.x;
+            vi[3 * k + 1] = i.y;
+            vi[3 * k + 2] = i.z;
+            vw[3 * k] = 1.0f - uv.x - uv.y;
+            vw[3 * k + 1] = uv.x;
+            vw[3 * k + 2] = uv.y;
+        }
+    }
+    float dc[3];
+    camera_ray_dir_into(f->cam, px, py, dc);
+#if FAST_MATH
+    for (int c = 0; c < 3; ++c) {
+        const float u = (dc[c] + 1.0f) * (0.5f * (float)(VIEW_NODES - 1));
+        node[c] = clamp((int)u, 0, VIEW_NODES - 2);
+        frac[c] = u - (float)node[c];
+    }
+#else
+    ndrf_view_encoding(vload3(0, dc), view);
+#endif
+}
+
+#define NB (H_STRIDE / H_VEC)
+
+/* acc += tap t of one screen pixel (all H_STRIDE outputs, NB vectors): its geometry
+ * through the per-vertex projections plus its view encoding's (weights, or table lerp). */
+inline void ndrf_tap(hvec *acc, int t, const int *vi, const float *vw, const float *view,
+                     const int *node, const float *frac, __global const float *proj,
+                     __global const float *w_view)
+{
+    for (int e = 0; e < 3 * K; ++e) {
+        if (vi[e] < 0) continue;
+        __global const float *a = proj + ((size_t)vi[e] * TAPS + t) * H_STRIDE;
+        const float b = vw[e];
+        for (int j = 0; j < NB; ++j) acc[j] = acc[j] + b * vload_h(j, a);
+    }
+#if FAST_MATH
+    for (int c = 0; c < 3; ++c) {
+        __global const float *a = w_view + ((c * TAPS + t) * VIEW_NODES + node[c]) * H_STRIDE;
+        const float b = frac[c];
+        for (int j = 0; j < NB; ++j) {
+            const hvec lo = vload_h(j, a);
+            acc[j] = acc[j] + (lo + b * (vload_h(j, a + H_STRIDE) - lo));
+        }
+    }
+#else
+    __global const float *w = w_view + t * VIEW_C * H_STRIDE;
+    for (int c = 0; c < VIEW_C; ++c)
+        for (int j = 0; j < NB; ++j) acc[j] = acc[j] + view[c] * vload_h(j, w + c * H_STRIDE);
+#endif
+}
+
+/* conv0 factored by linearity: a pixel's geometry channels are barycentric blends of its
+ * triangle's per-vertex values, so tap t's weights applied to them equal the same blend of
+ * proj[v][t] = W_t (features[v], vertices[v]) (clrender/ndrf/shader_cl.py:
+ * vertex_projections), 3 x HIDDEN MACs a mesh instead of 11 x HIDDEN. The view channels:
+ * exact build, the encoding times its weights; fast build, a sum over the three direction
+ * components of a tabulated 1D function each, linearly interpolated (view_weights). */
+__kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const float *w_view,
+                         __global const float *b0, __global float *hidden)
+{
+    const int x0 = (int)get_global_id(0) * SEG, y0 = (int)get_global_id(1) * ROWS;
+    if (x0 >= width || y0 >= height) return;
     const Frame f = FRAME_INIT;
-    if (!ndrf_hidden_needed(&f, x0, py)) return;
-    float in[KSIZE][SEG + PAD][C_IN];
-    for (int dy = 0; dy < KSIZE; ++dy)
-        for (int i = 0; i < SEG + PAD; ++i) ndrf_screen_pixel(&f, x0 + i, py + dy, in[dy][i]);
-    for (int q0 = 0; q0 < SEG && x0 + q0 < width; q0 += PIX) {
-        for (int j0 = 0; j0 < H_STRIDE / H_VEC; j0 += H_BLOCK) {
-            hvec acc[PIX][H_BLOCK];
-            for (int q = 0; q < PIX; ++q)
-                for (int j = 0; j < H_BLOCK; ++j) acc[q][j] = vload_h(j0 + j, b0);
-            for (int dy = 0; dy < KSIZE; ++dy) {
-                for (int dx = 0; dx < KSIZE; ++dx) {
-                    __global const float *w =
-                        w0 + (dy * KSIZE + dx) * C_IN * H_STRIDE + H_VEC * j0;
-                    for (int c = 0; c < C_IN; ++c) {
-                        for (int j = 0; j < H_BLOCK; ++j) {
-                            const hvec wv = vload_h(j, w + c * H_STRIDE);
-                            for (int q = 0; q < PIX; ++q)
-                                acc[q][j] = acc[q][j] + in[dy][q0 + q + dx][c] * wv;
-                        }
-                    }
-                }
-            }
-            for (int q = 0; q < PIX && x0 + q0 + q < width; ++q) {
-                __global float *h = hidden + ((size_t)(py + PAD) * (width + PAD) + x0 + q0 + q
-                                              + PAD) * H_STRIDE;
-                for (int j = 0; j < H_BLOCK; ++j) vstore_h(ndrf_relu(acc[q][j]), j0 + j, h);
-            }
+    const int nx = min(SEG, width - x0) + PAD, ny = min(ROWS, height - y0) + PAD;
+    /* hidden (x, y) is read by the covered pixels among (x..x+PAD, y..y+PAD): conv0's own
+     * input pixels. */
+    if (!ndrf_any_covered(&f, x0, y0, nx, ny)) return;
+    int inside[ROWS + PAD][SEG + PAD], vi[ROWS + PAD][SEG + PAD][3 * K];
+    int node[ROWS + PAD][SEG + PAD][3];
+    float vw[ROWS + PAD][SEG + PAD][3 * K], frac[ROWS + PAD][SEG + PAD][3];
+    float view[ROWS + PAD][SEG + PAD][VIEW_C];
+    for (int r = 0; r < ny; ++r)
+        for (int i = 0; i < nx; ++i)
+            ndrf_conv0_pixel(&f, x0 + i, y0 + r, &inside[r][i], vi[r][i], vw[r][i],
+                             view[r][i], node[r][i], frac[r][i]);
+    for (int r = 0; r < ny - PAD; ++r) {
+        for (int q = 0; q < nx - PAD; ++q) {
+            int needed = 0;
+            for (int dy = 0; dy < KSIZE; ++dy)
+                for (int dx = 0; dx < KSIZE; ++dx)
+                    for (int k = 0; k < K; ++k) needed |= vi[r + dy][q + dx][3 * k] >= 0;
+            if (!needed) continue;
+            hvec acc[NB];
+            for (int j = 0; j < NB; ++j) acc[j] = vload_h(j, b0);
+            for (int dy = 0; dy < KSIZE; ++dy)
+                for (int dx = 0; dx < KSIZE; ++dx)
+                    if (inside[r + dy][q + dx])
+                        ndrf_tap(acc, dy * KSIZE + dx, vi[r + dy][q + dx], vw[r + dy][q + dx],
+                                 view[r + dy][q + dx], node[r + dy][q + dx],
+                                 frac[r + dy][q + dx], proj, w_view);
+            __global float *h = hidden + ((size_t)(y0 + r + PAD) * (width + PAD) + x0 + q
+                                         + PAD) * H_STRIDE;
+            for (int j = 0; j < NB; ++j) vstore_h(ndrf_relu(acc[j]), j, h);
         }
     }
 }

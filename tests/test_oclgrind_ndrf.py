@@ -37,10 +37,9 @@ for atomics64 in (True, False):
               flush=True)
 keep.append(Rasteriser(model))
 hits = keep[-1].hits(views["border"])
-# Both conv0 organisations: one pixel per work-item (GPUs) and 8 per work-item (CPUs,
-# gathering past the image's right edge).
-for layout in ({"H_VEC": 8, "ACCUMULATORS": 0, "SEG": 1},
-               {"H_VEC": 16, "ACCUMULATORS": 16, "SEG": 8}):
+# Both conv0 organisations: one pixel per work-item (GPUs) and 8 x 4 per work-item (CPUs,
+# gathering past the image's right and bottom edges).
+for layout in ({"H_VEC": 8, "SEG": 1, "ROWS": 1}, {"H_VEC": 16, "SEG": 8, "ROWS": 4}):
     shader_cl.device_layout = lambda device, layout=layout: dict(layout)
     for kernel_size in (2, 1):
         for exact in (True, False):
@@ -49,7 +48,7 @@ for layout in ({"H_VEC": 8, "ACCUMULATORS": 0, "SEG": 1},
             keep.append(shader_cl.Shader(m, exact=exact))
             for frame in range(2):
                 rgb, ms = keep[-1].shade(views["border"], hits.tri, hits.bary)
-            print("SHADED", keep[-1].defines["PIX"], kernel_size, exact,
+            print("SHADED", keep[-1].defines["SEG"], kernel_size, exact,
                   round(float(hits.coverage.mean()), 3), bool(hits.coverage[-1, -1]), flush=True)
 keep.append(Renderer(model))
 out = keep[-1].render(views["border"], stats=True)

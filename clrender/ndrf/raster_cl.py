@@ -8,9 +8,11 @@ unit ray, recomputed from the pixel ray. The hit buffers stay on the device for
 :class:`clrender.ndrf.shader_cl.Shader`; :meth:`Rasteriser.hits` reads them back (tests,
 statistics). :class:`clrender.ndrf.hits.HitCaster` (Embree) is the reference.
 
-Triangles whose screen box exceeds one TILE x TILE tile are binned into (triangle, tile)
-pairs and covered by a second pass, parallel over the pairs, so no work-item loops over more
-than TILE^2 pixels, however close the camera.
+A triangle whose screen box holds at most TILE^2 pixels is covered by its own work-item, row
+by row over the span its edges allow; a larger one is binned into (triangle, tile) pairs and
+covered by a second pass, parallel over the pairs, so no work-item loops over more than
+TILE^2 pixels, however close the camera. (An area bound, not a side bound: the slivers of a
+decimated mesh have long thin boxes, and binning those cost more than covering them.)
 
 Examples:
     >>> raster = Rasteriser(model)
@@ -29,7 +31,7 @@ from ..device import check_allocation, event_ms, get_runtime, padded, work_group
 from .hits import Hits
 
 F32, I32 = np.float32, np.int32
-TILE = 16                   # pixels a side of a binning tile (TILE^2 pixels a work-item)
+TILE = 32                   # pixels a side of a binning tile (TILE^2 pixels a work-item)
 INITIAL_PAIRS = 1 << 14     # (triangle, tile) pairs first allocated; grown on demand
 
 

@@ -33,7 +33,7 @@ from .raster_cl import packed_geometry
 
 F32, I32 = np.float32, np.int32
 KERNELS = ("ndrf_conv0", "ndrf_conv1", "ndrf_screen", "ndrf_zero_padding")
-BLOCK_FLOATS = 32     # output channels per conv0 block (H_VEC * H_BLOCK)
+VIEW_NODES = 1025     # nodes of the fast build's view table over [-1, 1]
 
 
 def _round_up(n: int, m: int) -> int:
@@ -41,39 +41,31 @@ def _round_up(n: int, m: int) -> int:
 
 
 def device_layout(device: cl.Device) -> dict:
-    """How conv0 is organised on ``device``: ``H_VEC`` floats per vector, ``ACCUMULATORS``,
-    the vectors a work-item may keep accumulating (0: one pixel each), and ``SEG``, the
-    pixels a work-item shades (it gathers their screen pixels once).
+    """How conv0 is organised on ``device``: ``H_VEC`` floats per vector, and the block of
+    outputs a work-item computes, ``SEG`` pixels wide and ``ROWS`` high (it gathers its
+    (SEG + 1) x (ROWS + 1) input pixels once).
 
-    CPUs: vectors as wide as the device prefers (16 floats with AVX-512, else 8) and about
-    half the vector registers (32 zmm or 16 ymm) as accumulators, so each weight vector,
-    loaded once, feeds several pixels; 8 pixels a work-item, so the gather of the 2x2 conv's
-    neighbours is shared (9 x 2 screen pixels for 8 outputs). GPUs: one pixel per work-item,
-    parallelism from the work-items themselves.
+    CPUs: vectors as wide as the device prefers (16 floats with AVX-512, else 8), blocks of
+    8 x 4 pixels (45 input pixels for 32 outputs, instead of 4 a pixel); GPUs: one pixel
+    per work-item, parallelism from the work-items themselves.
     """
     if device_type_name(device) == "GPU":
-        return {"H_VEC": 8, "ACCUMULATORS": 0, "SEG": 1}
-    wide = device.preferred_vector_width_float >= 16
-    return {"H_VEC": 16 if wide else 8, "ACCUMULATORS": 16 if wide else 8, "SEG": 8}
+        return {"H_VEC": 8, "SEG": 1, "ROWS": 1}
+    return {"H_VEC": 16 if device.preferred_vector_width_float >= 16 else 8, "SEG": 8,
+            "ROWS": 4}
 
 
-def kernel_defines(config: NDRFConfig, h_vec: int = 8, accumulators: int = 0,
-                   seg: int = 1) -> dict:
+def kernel_defines(config: NDRFConfig, h_vec: int = 8, seg: int = 1, rows: int = 1) -> dict:
     """The ``-D`` defines of ``kernels/ndrf_shade.cl`` for a model config.
 
     The model constants (K, FEATURES, C_IN, HIDDEN, N_FREQ, KSIZE) come from the config;
-    the layout follows from :func:`device_layout`, here and nowhere else: conv0 computes
-    blocks of up to BLOCK_FLOATS output channels (H_BLOCK vectors of H_VEC floats) for PIX
-    adjacent pixels, PIX * H_BLOCK accumulators, SEG pixels (rounded up to a multiple of
-    PIX) a work-item; H_STRIDE is the hidden width rounded up to whole blocks.
+    the layout (H_VEC, SEG, ROWS) from :func:`device_layout`; H_STRIDE is the hidden width
+    rounded up to whole vectors; VIEW_NODES the fast build's view table nodes.
     """
-    h_block = max(1, min(BLOCK_FLOATS // h_vec, -(-config.hidden // h_vec)))
-    pix = max(1, accumulators // h_block)
     return {"K": config.K, "FEATURES": FEATURES, "C_IN": config.c_in,
             "HIDDEN": config.hidden, "N_FREQ": config.n_freq, "KSIZE": config.kernel_size,
-            "H_VEC": int(h_vec), "H_BLOCK": h_block,
-            "H_STRIDE": _round_up(config.hidden, h_vec * h_block),
-            "PIX": pix, "SEG": _round_up(max(1, seg), pix)}
+            "H_VEC": int(h_vec), "H_STRIDE": _round_up(config.hidden, h_vec),
+            "SEG": max(1, int(seg)), "ROWS": max(1, int(rows)), "VIEW_NODES": VIEW_NODES}
 
 
 def packed_meshes(model) -> dict:
@@ -84,22 +76,74 @@ def packed_meshes(model) -> dict:
             "features": np.concatenate([np.asarray(model.mesh(k)[2], F32) for k in range(K)])}
 
 
-def packed_weights(model, defines: dict) -> dict:
-    """The conv weights zero-padded to the kernel's strides (see ``kernels/ndrf_shade.cl``).
+def vertex_projections(model, defines: dict) -> np.ndarray:
+    """conv0's weights applied to every vertex's geometry channels, per tap.
 
-    Returns ``w0`` (S*S, C_in, H_STRIDE), ``b0`` (H_STRIDE,), ``w1`` (S*S, 3, H_STRIDE)
-    (output-major, so a pixel's hidden vector meets contiguous weights), ``b1`` (3,).
+    Returns (sum V_k, S*S, H_STRIDE) float32: for vertex v of mesh k and tap t,
+    W_t[features of k] @ features[v] + W_t[positions of k] @ vertices[v] (float64, then
+    rounded), zero-padded; conv0 blends these by a hit's barycentrics (linearity).
     """
     a, cfg = model.arrays, model.config
-    S, C, H = cfg.kernel_size, cfg.c_in, cfg.hidden
+    S, C, H, K = cfg.kernel_size, cfg.c_in, cfg.hidden, cfg.K
+    w = np.asarray(a["conv0_w"], np.float64).reshape(S * S, C, H)
+    out = []
+    for k in range(K):
+        vertices, _, feats = model.mesh(k)
+        p = (np.einsum("vc,tch->vth", np.asarray(feats, np.float64),
+                       w[:, FEATURES * k:FEATURES * (k + 1)])
+             + np.einsum("vc,tch->vth", np.asarray(vertices, np.float64),
+                         w[:, FEATURES * K + 3 * k:FEATURES * K + 3 * (k + 1)]))
+        out.append(p)
+    proj = np.zeros((sum(len(p) for p in out), S * S, defines["H_STRIDE"]), F32)
+    proj[..., :H] = np.concatenate(out)
+    return proj
+
+
+def view_weights(model, defines: dict, exact: bool) -> np.ndarray:
+    """conv0's view-channel weights as the kernel's build reads them.
+
+    exact: (S*S, VIEW_C, H_STRIDE) float32, the weights of the view encoding's channels.
+    Otherwise the table (3, S*S, VIEW_NODES, H_STRIDE) float32: for direction component c,
+    tap t and node s_n = -1 + 2n / (VIEW_NODES - 1), the sum of the weights of d_c,
+    sin(2^i d_c) and cos(2^i d_c) times those functions of s_n (float64, then rounded):
+    a pixel's view contribution is the sum over c of this 1D function at d_c, which the
+    kernel interpolates linearly (max error ~ h^2 / 8 * |f''|, h = 2 / (VIEW_NODES - 1)).
+    """
+    a, cfg = model.arrays, model.config
+    S, C, H, N = cfg.kernel_size, cfg.c_in, cfg.hidden, cfg.n_freq
+    w = np.asarray(a["conv0_w"], np.float64).reshape(S * S, C, H)[:, C - cfg.view_channels:]
+    if exact:
+        out = np.zeros((S * S, cfg.view_channels, defines["H_STRIDE"]), F32)
+        out[..., :H] = w
+        return out
+    s = np.linspace(-1.0, 1.0, defines["VIEW_NODES"])
+    table = np.zeros((3, S * S, len(s), defines["H_STRIDE"]), F32)
+    for c in range(3):
+        f = s[None, :, None] * w[:, None, c]
+        for i in range(N):
+            f = (f + np.sin(2.0 ** i * s)[None, :, None] * w[:, None, 3 + 6 * i + c]
+                 + np.cos(2.0 ** i * s)[None, :, None] * w[:, None, 6 + 6 * i + c])
+        table[c, ..., :H] = f
+    return table
+
+
+def packed_weights(model, defines: dict, exact: bool) -> dict:
+    """The conv weights as the kernels read them (see ``kernels/ndrf_shade.cl``).
+
+    Returns ``proj`` (:func:`vertex_projections`), ``w_view`` (:func:`view_weights`),
+    ``b0`` (H_STRIDE,), ``w1`` (S*S, 3, H_STRIDE) (output-major, so a pixel's hidden vector
+    meets contiguous weights), ``b1`` (3,), all float32 and zero-padded to H_STRIDE.
+    """
+    a, cfg = model.arrays, model.config
+    S, H = cfg.kernel_size, cfg.hidden
     hs = defines["H_STRIDE"]
-    w0 = np.zeros((S * S, C, hs), F32)
-    w0[..., :H] = a["conv0_w"].reshape(S * S, C, H)
     b0 = np.zeros(hs, F32)
     b0[:H] = a["conv0_b"]
     w1 = np.zeros((S * S, 3, hs), F32)
     w1[:, :, :H] = a["conv1_w"].reshape(S * S, H, 3).transpose(0, 2, 1)
-    return {"w0": w0, "b0": b0, "w1": w1, "b1": np.asarray(a["conv1_b"], F32)}
+    return {"proj": vertex_projections(model, defines),
+            "w_view": view_weights(model, defines, exact), "b0": b0, "w1": w1,
+            "b1": np.asarray(a["conv1_b"], F32)}
 
 
 class Shader:
@@ -110,7 +154,7 @@ class Shader:
         device: OpenCL device spec or :class:`clrender.device.Runtime` (default
             ``$CLRENDER_DEVICE``).
         exact: the exact build (``Runtime.program(exact=True)``, held to the numpy
-            reference in tests); default the fast build (native sin, cos and exp).
+            reference in tests); default the fast build (the view table, native exp).
     """
 
     def __init__(self, model, device=None, exact: bool = False):
@@ -119,13 +163,13 @@ class Shader:
         self.runtime = rt = get_runtime(device)
         self.exact = bool(exact)
         layout = device_layout(rt.device)
-        self.defines = kernel_defines(self.config, layout["H_VEC"], layout["ACCUMULATORS"],
-                                      layout.get("SEG", 1))
+        self.defines = kernel_defines(self.config, layout["H_VEC"], layout["SEG"],
+                                      layout["ROWS"])
         program = rt.program("ndrf_shade.cl", self.defines, self.exact)
         self._kernels = {name: program.kernel(name) for name in KERNELS}
         self._local: dict = {}
         self._n_faces = [len(model.mesh(k)[1]) for k in range(self.config.K)]
-        arrays = {**packed_meshes(model), **packed_weights(model, self.defines)}
+        arrays = {**packed_meshes(model), **packed_weights(model, self.defines, self.exact)}
         mf = cl.mem_flags
         self._model_bufs = {name: cl.Buffer(rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR,
                                             hostbuf=np.ascontiguousarray(a))
@@ -221,8 +265,8 @@ class Shader:
         bg = [F32(c) for c in np.asarray(bg, np.float64).reshape(3)]
         cl.enqueue_copy(q, b["cam"], camera.packed())
         frame = self._frame_args(camera, tri_buf, bary_buf)
-        ev_conv0 = self._run("ndrf_conv0", -(-w // self.defines["SEG"]), h, *frame, m["w0"], m["b0"],
-                             b["hidden"])
+        ev_conv0 = self._run("ndrf_conv0", -(-w // self.defines["SEG"]), -(-h // self.defines["ROWS"]), *frame, m["proj"], m["w_view"],
+                             m["b0"], b["hidden"])
         ev_conv1 = self._run("ndrf_conv1", w, h, *frame, b["hidden"], m["w1"], m["b1"], *bg,
                              b["rgb"])
         rgb = np.empty((h, w, 3), F32)
