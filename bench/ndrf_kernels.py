@@ -14,10 +14,10 @@ With ``--teacher`` the NGP-RT teacher renders the same cameras in the same run: 
 student's speed-up is the teacher's median frame time over the student's (raster path).
 
 Bounds, from this device's rates measured here (:mod:`bench.limits`): conv0 and conv1 from
-their FLOPs (every pixel conv0 computes, i.e. read by a covered pixel, times C_in x S^2 x
-H x 2; covered pixels times H x S^2 x 3 x 2) at the measured FLOP rate; the gather from its
-reads (each gathered screen pixel: per mesh hit, 3 vertex feature rows, float8) at the
-measured random-gather rate; the rasteriser is reported per triangle and per covered
+their FLOPs (:func:`counters`: conv0 as the kernel computes it, factored by linearity into
+per-vertex projections and a view table) at the measured FLOP rate; conv0's gathers (its
+projected vertex rows and table rows, one random read each) at the random-gather rate
+measured on a table of the projections' size; the rasteriser is reported per triangle and per covered
 pixel-layer (it has no single bound: setup per triangle, edge tests per box pixel, one
 atomic per covered pixel and layer). Writes ``<out>/ndrf_kernels[_<model>].{json,md}``.
 Never asserts.
@@ -61,18 +61,36 @@ def _spread(mask: np.ndarray, radius: int, step: int) -> np.ndarray:
     return out
 
 
+def _shifted(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
+    """(H, W): a at p + (dy, dx), zero outside the image."""
+    out = np.zeros_like(a)
+    h, w = a.shape
+    out[:h - dy, :w - dx] = a[dy:, dx:]
+    return out
+
+
 def counters(model, out: dict) -> dict:
-    """What one frame must compute: conv0 / conv1 FLOPs and screen-pixel gathers."""
+    """What one frame must compute: conv0 / conv1 FLOPs and conv0's gathered rows.
+
+    conv0 (kernels/ndrf_shade.cl, factored; fast build): for each pixel it computes (read by
+    a covered pixel) and tap, 3 projected vertex rows of H channels blended per mesh hit at
+    the tap's input pixel (2 FLOPs a channel) and 3 view-table lerps (3 FLOPs a channel)
+    for an input pixel inside the image; gathers: those rows (3 per hit, 2 per lerp; one
+    random read each, its H floats contiguous). conv1: covered pixels x H x S^2 x 3 x 2.
+    """
     cfg = model.config
     S, H, r = cfg.kernel_size, cfg.hidden, cfg.kernel_size - 1
     coverage = out["coverage"] > 0
     needed = _spread(coverage, r, 1)          # conv1 at p reads hidden at p - (0..r)
-    gathered = _spread(needed, r, -1)         # conv0 at p reads the screen at p + (0..r)
-    n_hits = float(out["n_hits"][gathered].sum())
+    n_hits = out["n_hits"].astype(np.float64)
+    inside = np.ones_like(n_hits)
+    tap_hits = sum(_shifted(n_hits, dy, dx)[needed].sum() for dy in range(S) for dx in range(S))
+    tap_inside = sum(_shifted(inside, dy, dx)[needed].sum() for dy in range(S) for dx in range(S))
     return {"covered": int(coverage.sum()), "conv0_pixels": int(needed.sum()),
-            "conv0_flops": float(needed.sum()) * cfg.c_in * S * S * H * 2,
+            "conv0_flops": float(tap_hits * 3 * H * 2 + tap_inside * 3 * H * 3),
             "conv1_flops": float(coverage.sum()) * H * S * S * 3 * 2,
-            "gathers": 3.0 * n_hits, "hit_layers": int(out["n_hits"].sum())}
+            "gathers": float(tap_hits * 3 + tap_inside * 6),
+            "hit_layers": int(out["n_hits"].sum())}
 
 
 def measure(renderer, cameras, repeats: int) -> dict:
@@ -121,8 +139,8 @@ def markdown(rows: list[dict], meta: dict) -> str:
              f"after a warm-up, median (p10-p90). Rates measured here: "
              f"{meta['rates']['flops_per_s'] / 1e9:.0f} GFLOP/s, "
              f"{meta['rates']['gathers_per_s'] / 1e9:.2f} G random float8 gathers/s. "
-             "Bounds: conv0 at the FLOP rate (its gather of the screen pixels adds "
-             "at least the gather bound in brackets), conv1 at the FLOP rate. Speed-up: the "
+             "Bounds: conv0 at the FLOP rate (plus its gathered rows at the gather "
+             "rate, in brackets), conv1 at the FLOP rate. Speed-up: the "
              "NGP-RT teacher's median frame time over this row's, same cameras, same run.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
@@ -145,8 +163,8 @@ def run(model, frames: dict, repeats: int, out: Path, name: str, views: str, dev
     """Measure ``model`` on ``frames`` ({label: cameras}) with both hit sources."""
     renderers = {h: Renderer(model, device=device, hits=h) for h in HIT_SOURCES}
     runtime = renderers["raster"].runtime
-    feature_bytes = sum(int(model.mesh(k)[2].nbytes) for k in range(model.config.K))
-    rates = {"flops_per_s": flop_rate(runtime), "gathers_per_s": gather_rate(feature_bytes,
+    proj_bytes = int(renderers["raster"].shader.projection_bytes)
+    rates = {"flops_per_s": flop_rate(runtime), "gathers_per_s": gather_rate(proj_bytes,
                                                                             runtime)}
     rows = []
     for label, cameras in frames.items():

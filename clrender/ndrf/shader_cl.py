@@ -3,14 +3,17 @@ sigmoid.
 
 Two pixel-parallel passes (``kernels/ndrf_shade.cl``, one per conv layer as in the paper's
 WebGL shader) implement docs/ndrf.md; :mod:`clrender.ndrf.shader_ref` is the numpy
-reference they are tested against. The first pass gathers each screen pixel's features,
-hit positions and view encoding from the hits on the fly, so no screen buffer goes through
-global memory. A :class:`Shader` uploads the meshes, features and weights once, builds its
-program once per (device, ``-D`` defines, build) and keeps its frame buffers while the image
-size stays the same. The hits come from the device (:meth:`Shader.shade_device`, the
-rasteriser's buffers) or from the host (:meth:`Shader.shade`, Embree's arrays, uploaded).
-The passes compute only what a covered pixel's colour depends on; pixels no mesh covers get
-the background, as the contract says they must.
+reference they are tested against. The first pass computes the conv factored by linearity
+(docs/ndrf.md, "How the OpenCL kernel computes layer 0"): per-vertex projections of the
+geometry channels (:func:`vertex_projections`) blended by each hit's barycentrics, and the
+view channels' weights (exact build) or their table (fast build, :func:`view_weights`),
+all made once when the model is loaded; no screen buffer goes through global memory. A
+:class:`Shader` uploads them once, builds its program once per (device, ``-D`` defines,
+build) and keeps its frame buffers while the image size stays the same. The hits come from
+the device (:meth:`Shader.shade_device`, the rasteriser's buffers) or from the host
+(:meth:`Shader.shade`, Embree's arrays, uploaded). The passes compute only what a covered
+pixel's colour depends on; pixels no mesh covers get the background, as the contract says
+they must.
 
 Examples:
     >>> hits = HitCaster(model).cast_camera(camera)
@@ -174,6 +177,7 @@ class Shader:
         self._model_bufs = {name: cl.Buffer(rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR,
                                             hostbuf=np.ascontiguousarray(a))
                             for name, a in arrays.items()}
+        self.projection_bytes = arrays["proj"].nbytes   # the table conv0 gathers rows of
         self._size = None
         self._bufs: dict = {}
 
