@@ -201,8 +201,8 @@ inline hvec ndrf_relu(hvec x)
  * outside the image, vw[3k + e] their barycentric weights (1-u-v, u, v); the view encoding
  * (exact build: the VIEW_C channels) or its table lookups (fast build: node and fraction per
  * direction component), untouched outside the image (*inside = 0). */
-inline void ndrf_conv0_pixel(const Frame *f, int px, int py, int *inside, int *vi, float *vw,
-                             float *view, int *node, float *frac)
+inline void ndrf_conv0_pixel(const Frame *f, const float *inv_f, int px, int py, int *inside,
+                             int *vi, float *vw, float *view, int *node, float *frac)
 {
     *inside = px < f->width && py < f->height;
     for (int e = 0; e < 3 * K; ++e) {
@@ -227,14 +227,22 @@ inline void ndrf_conv0_pixel(const Frame *f, int px, int py, int *inside, int *v
         }
     }
     float dc[3];
-    camera_ray_dir_into(f->cam, px, py, dc);
 #if FAST_MATH
+    /* The ray direction of kernels/camera.h with one division where it has five (inv_f:
+     * the reciprocal focal lengths, once a work-item): a few ulp off. */
+    __global const float *cam = f->cam;
+    const float a = ((float)px + 0.5f - cam[2]) * inv_f[0];
+    const float b = -(((float)py + 0.5f - cam[3]) * inv_f[1]);
+    for (int c = 0; c < 3; ++c) dc[c] = cam[4 + 3 * c] * a + cam[5 + 3 * c] * b - cam[6 + 3 * c];
+    const float inv_norm = 1.0f / sqrt(dc[0] * dc[0] + dc[1] * dc[1] + dc[2] * dc[2]);
     for (int c = 0; c < 3; ++c) {
+        dc[c] = dc[c] * inv_norm;
         const float u = (dc[c] + 1.0f) * (0.5f * (float)(VIEW_NODES - 1));
         node[c] = clamp((int)u, 0, VIEW_NODES - 2);
         frac[c] = u - (float)node[c];
     }
 #else
+    camera_ray_dir_into(f->cam, px, py, dc);
     ndrf_view_encoding(vload3(0, dc), view);
 #endif
 }
@@ -251,12 +259,14 @@ inline void ndrf_tap(hvec *acc, int t, const int *vi, const float *vw, const flo
         if (vi[e] < 0) continue;
         __global const float *a = proj + ((size_t)vi[e] * TAPS + t) * H_STRIDE;
         const float b = vw[e];
+        #pragma unroll
         for (int j = 0; j < NB; ++j) acc[j] = acc[j] + b * vload_h(j, a);
     }
 #if FAST_MATH
     for (int c = 0; c < 3; ++c) {
         __global const float *a = w_view + ((c * TAPS + t) * VIEW_NODES + node[c]) * H_STRIDE;
         const float b = frac[c];
+        #pragma unroll
         for (int j = 0; j < NB; ++j) {
             const hvec lo = vload_h(j, a);
             acc[j] = acc[j] + (lo + b * (vload_h(j, a + H_STRIDE) - lo));
@@ -265,6 +275,7 @@ inline void ndrf_tap(hvec *acc, int t, const int *vi, const float *vw, const flo
 #else
     __global const float *w = w_view + t * VIEW_C * H_STRIDE;
     for (int c = 0; c < VIEW_C; ++c)
+        #pragma unroll
         for (int j = 0; j < NB; ++j) acc[j] = acc[j] + view[c] * vload_h(j, w + c * H_STRIDE);
 #endif
 }
@@ -289,9 +300,10 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
     int node[ROWS + PAD][SEG + PAD][3];
     float vw[ROWS + PAD][SEG + PAD][3 * K], frac[ROWS + PAD][SEG + PAD][3];
     float view[ROWS + PAD][SEG + PAD][VIEW_C];
+    const float inv_f[2] = {1.0f / cam[0], 1.0f / cam[1]};
     for (int r = 0; r < ny; ++r)
         for (int i = 0; i < nx; ++i)
-            ndrf_conv0_pixel(&f, x0 + i, y0 + r, &inside[r][i], vi[r][i], vw[r][i],
+            ndrf_conv0_pixel(&f, inv_f, x0 + i, y0 + r, &inside[r][i], vi[r][i], vw[r][i],
                              view[r][i], node[r][i], frac[r][i]);
     for (int r = 0; r < ny - PAD; ++r) {
         for (int q = 0; q < nx - PAD; ++q) {
@@ -301,6 +313,7 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
                     for (int k = 0; k < K; ++k) needed |= vi[r + dy][q + dx][3 * k] >= 0;
             if (!needed) continue;
             hvec acc[NB];
+            #pragma unroll
             for (int j = 0; j < NB; ++j) acc[j] = vload_h(j, b0);
             for (int dy = 0; dy < KSIZE; ++dy)
                 for (int dx = 0; dx < KSIZE; ++dx)
@@ -310,6 +323,7 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
                                  frac[r + dy][q + dx], proj, w_view);
             __global float *h = hidden + ((size_t)(y0 + r + PAD) * (width + PAD) + x0 + q
                                          + PAD) * H_STRIDE;
+            #pragma unroll
             for (int j = 0; j < NB; ++j) vstore_h(ndrf_relu(acc[j]), j, h);
         }
     }
