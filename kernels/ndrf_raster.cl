@@ -181,17 +181,18 @@ inline void write_hit(const Target *tg, int k, int p, float depth, int id)
 /* The columns [*lo, *hi] of [x0, x1] where, on a row, all three edge functions of t may be
  * >= 0, one pixel of slack either side (*lo > *hi: none). On the row of ray b = ry the edge
  * function E = c0 a + rest, rest = c1 ry - c2, is linear in the pixel ray's
- * a = (px + 0.5 - cx) / fx and changes sign once, at a = -rest / c0; the exact edge tests
- * then run on this span only, not on the whole box. Two triangles sharing an edge compute
+ * a = (px + 0.5 - cx) / fx and changes sign once, at a = -rest / c0 (inv_c0: the 1 / c0
+ * of the three edges); the exact edge tests then run on this span only, not on the whole
+ * box. Two triangles sharing an edge compute
  * exactly negated c and rest, hence the same crossing: their spans overlap by the slack. */
-inline void row_span(const Tri *t, const float *rest, float fx, float cx, int x0, int x1,
-                     int *lo, int *hi)
+inline void row_span(const Tri *t, const float *rest, const float *inv_c0, float fx, float cx,
+                     int x0, int x1, int *lo, int *hi)
 {
     float a_lo = -INFINITY, a_hi = INFINITY;
     for (int e = 0; e < 3; ++e) {
         const float c0 = t->c[3 * e];
-        if (c0 > 0.0f) a_lo = fmax(a_lo, -rest[e] / c0);
-        else if (c0 < 0.0f) a_hi = fmin(a_hi, -rest[e] / c0);
+        if (c0 > 0.0f) a_lo = fmax(a_lo, -rest[e] * inv_c0[e]);
+        else if (c0 < 0.0f) a_hi = fmin(a_hi, -rest[e] * inv_c0[e]);
         else if (rest[e] < 0.0f) a_hi = -INFINITY;
     }
     /* a to pixel columns, clamped as floats first (a may be +-inf). */
@@ -215,6 +216,7 @@ inline void cover(__global const float *ray_ab, float fx, float cx, const Tri *t
     const float c00 = t->c[0], c10 = t->c[3], c20 = t->c[6], nx = t->n[0];
     const int own0 = edge_owns_ties(t->c), own1 = edge_owns_ties(t->c + 3),
               own2 = edge_owns_ties(t->c + 6);
+    const float inv_c0[3] = {1.0f / c00, 1.0f / c10, 1.0f / c20};
     x0 = max(x0, t->x0);
     x1 = min(x1, t->x1);
     for (int py = max(y0, t->y0); py <= min(y1, t->y1); ++py) {
@@ -223,7 +225,7 @@ inline void cover(__global const float *ray_ab, float fx, float cx, const Tri *t
         for (int e = 0; e < 3; ++e) rest[e] = t->c[3 * e + 1] * ry - t->c[3 * e + 2];
         const float rest_n = t->n[1] * ry - t->n[2];
         int lo, hi;
-        row_span(t, rest, fx, cx, x0, x1, &lo, &hi);
+        row_span(t, rest, inv_c0, fx, cx, x0, x1, &lo, &hi);
         for (int px = lo; px <= hi; ++px) {
             const float rx = ray_ab[px];
             const float e0 = c00 * rx + rest[0], e1 = c10 * rx + rest[1],
@@ -309,10 +311,11 @@ inline float dot3(const float *a, const float *b)
 
 /* Embree's (u, v) and distance along the unit ray: Moller-Trumbore on the world-space
  * triangle, clamped into the triangle (a pixel the edge test covered may sit a rounding
- * error outside). Scalar arrays for Oclgrind, as in cover(). */
+ * error outside). The ray direction only where a mesh is hit. Scalar arrays for Oclgrind,
+ * as in cover(). */
 __kernel void ndrf_resolve(__global const float *cam, const int width, const int height,
                            __global const int *face_start, __global const int *faces,
-                           __global const float *vertices,
+                           __global const float *vertices, __global const float *ray_ab,
 #if ATOMICS64
                            __global const ulong *keys,
 #else
@@ -324,8 +327,8 @@ __kernel void ndrf_resolve(__global const float *cam, const int width, const int
     if (px >= width || py >= height) return;
     const int n = width * height;
     float o[3], d[3];
+    int have_dir = 0;
     vstore3(camera_ray_origin(cam), 0, o);
-    camera_ray_dir_into(cam, px, py, d);
     for (int k = 0; k < K; ++k) {
         const int idx = k * n + py * width + px;
 #if ATOMICS64
@@ -336,6 +339,15 @@ __kernel void ndrf_resolve(__global const float *cam, const int width, const int
 #endif
         float u = 0.0f, v = 0.0f, t = INFINITY;
         if (id >= 0) {
+            if (!have_dir) {
+                /* camera_ray_dir_into's operations on its a, b from ray_ab: the same bits. */
+                const float a = ray_ab[px], b = ray_ab[width + py];
+                for (int j = 0; j < 3; ++j)
+                    d[j] = cam[4 + 3 * j] * a + cam[5 + 3 * j] * b - cam[6 + 3 * j];
+                const float norm = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+                for (int j = 0; j < 3; ++j) d[j] = d[j] / norm;
+                have_dir = 1;
+            }
             const int g = face_start[k] + id;
             float p0[3], e1[3], e2[3], tv[3], pv[3], qv[3];
             for (int j = 0; j < 3; ++j) {

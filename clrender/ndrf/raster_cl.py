@@ -188,6 +188,7 @@ class Rasteriser:
             events += self._cover(camera, b, pass_)
         resolve = self._run("ndrf_resolve", (w, h), b["cam"], np.int32(w), np.int32(h),
                             self._geo["face_start"], self._geo["faces"], self._geo["vertices"],
+                            b["ray_ab"],
                             b["keys"] if self.atomics64 else b["ids"], b["tri"], b["bary"],
                             b["depth"])
         return b, {"ms_raster": sum(event_ms(e) for e in events),
