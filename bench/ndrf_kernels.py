@@ -139,8 +139,9 @@ def markdown(rows: list[dict], meta: dict) -> str:
              f"after a warm-up, median (p10-p90). Rates measured here: "
              f"{meta['rates']['flops_per_s'] / 1e9:.0f} GFLOP/s, "
              f"{meta['rates']['gathers_per_s'] / 1e9:.2f} G random float8 gathers/s. "
-             "Bounds: conv0 at the FLOP rate (plus its gathered rows at the gather "
-             "rate, in brackets), conv1 at the FLOP rate. Speed-up: the "
+             "Bounds: conv0 at the FLOP rate (+ the time of its gathered rows at the "
+             "random-gather rate, an upper estimate: neighbouring pixels share vertices, so "
+             "most rows come from cache), conv1 at the FLOP rate. Speed-up: the "
              "NGP-RT teacher's median frame time over this row's, same cameras, same run.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
