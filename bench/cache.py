@@ -69,12 +69,13 @@ def lock(path: Path) -> FileLock:
 
 def _make_scene(kind: str, path: Path) -> None:
     """Generate a built-in scene into ``path`` (its lock held): in a temporary folder, then
-    renamed, after clearing the folders of generators killed mid-way."""
+    renamed, after clearing the folders of this scene's generators killed mid-way."""
     from clrender.data import make_scene
 
-    for stale in path.parent.glob(".tmp-scene-*"):
+    prefix = f".tmp-scene-{path.name}-"
+    for stale in path.parent.glob(f"{prefix}*"):
         shutil.rmtree(stale, ignore_errors=True)
-    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=".tmp-scene-"))
+    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=prefix))
     make_scene(kind, tmp, seed=0)
     shutil.rmtree(path, ignore_errors=True)
     os.replace(tmp, path)

@@ -176,7 +176,7 @@ class Session:
             try:
                 files, record = self.ray.get(ref)
                 cache.commit(plan, files, record)
-            except self.ray.exceptions.RayTaskError as e:
+            except self.ray.exceptions.RayError as e:   # its own error, or retries spent
                 cause = getattr(e, "cause", None) or e
                 raise TaskFailed(f"training {plan.method} (preset {plan.preset}, seed "
                                  f"{plan.seed}, model {plan.key}) failed: "

@@ -11,8 +11,7 @@ not with the model are cut, and the cuts are written into the result:
   first 256 steps (each cell's sample runs the auxiliary NGP at its 8 corners): on 2 CPU
   cores that pass alone is ~10^4 s. Here: no warm-up (``occ_warmup=0``) and a
   ``--occ-fraction`` of the cells per update, so step 0 samples ~2 x 2^27 x fraction cells.
-- Visibility culling at bake: ``--cull-rays`` training rays instead of 2^18 (an untrained
-  model occupies most cells, so each ray carries ~300 samples).
+- Visibility culling at bake: ``--cull-rays`` training rays instead of 2^18.
 - NDRF: ``--distill-views`` distillation views instead of 1000, from a `tiny` NGP-RT
   teacher trained here (a few-step `paper` teacher has no geometry to extract meshes from;
   the student's sizes do not depend on the teacher's). Its extraction grid is the paper's
@@ -20,7 +19,8 @@ not with the model are cut, and the cuts are written into the result:
 Each phase runs in a child process of its own (spawned), so its peak resident memory
 (``ru_maxrss``) is its own. Since a few-step model occupies few cells, the `paper` batch
 (up to 2^21 samples) is measured apart: one training step at full occupancy at two batch
-sizes, their peak memory difference per sample extrapolated to 2^21 samples. Writes ``OUT/paper-smoke.json`` and prints it.
+sizes, their peak memory difference per sample extrapolated to 2^21 samples. Writes
+``OUT/paper-smoke.json`` and prints it.
 """
 from __future__ import annotations
 
