@@ -120,7 +120,8 @@ class Session:
         One progress bar: models done / total, tasks running, found cached."""
         pending, cached = unique_plans(plans), 0
         running: dict = {}            # ObjectRef of (files, record) -> (plan, held lock)
-        baked: dict = {}              # key -> ObjectRef of the baked bytes (teachers)
+        baked: dict = {}              # teacher's key -> ObjectRef of its baked bytes
+        self._teachers = {p.teacher.key for p in pending if p.teacher is not None}
         with tqdm(total=len(pending), desc=desc, unit="model") as bar:
             try:
                 while pending or running:
@@ -161,7 +162,8 @@ class Session:
         bytes_ref, rest_ref = self.remote.options(**res).remote(
             plan, None if teacher is None else baked[teacher.key], self.torch_device,
             res["num_cpus"])
-        baked[plan.key] = bytes_ref
+        if plan.key in self._teachers:     # students' bytes are not kept in the store
+            baked[plan.key] = bytes_ref
         running[rest_ref] = (plan, held)
         return True
 
