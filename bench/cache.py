@@ -205,9 +205,11 @@ def ensure(plan: ModelPlan, torch_device: str | None = None) -> ModelEntry:
 
 
 def train_into(plan: ModelPlan, folder: Path, teacher_baked: Path | None,
-               torch_device: str | None = None, progress: bool = True) -> dict:
+               torch_device: str | None = None, progress: bool = True,
+               revision: str | None = None) -> dict:
     """Train ``plan`` into ``folder/run`` and bake ``folder/model.npz``; returns the
-    record :func:`commit` stores (``spec``, ``train_minutes``, ``trained_by``)."""
+    record :func:`commit` stores (``spec``, ``train_minutes``, ``trained_by``;
+    ``revision``: see :func:`bench.provenance.trained_by`)."""
     import torch
 
     from clrender.runs import pick_device
@@ -222,7 +224,8 @@ def train_into(plan: ModelPlan, folder: Path, teacher_baked: Path | None,
                  **options)
     minutes = (time.perf_counter() - start) / 60.0
     plugin.bake_run(folder / "run", folder / "model.npz")
-    who = provenance.trained_by(str(pick_device(torch_device)), torch.get_num_threads())
+    who = provenance.trained_by(str(pick_device(torch_device)), torch.get_num_threads(),
+                                revision)
     return {"spec": plan.spec, "train_minutes": minutes,
             "trained_by": {**who, "method": plan.method, "preset": plan.preset,
                            "seed": plan.seed, "resumed_checkpoint": resumed}}

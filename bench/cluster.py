@@ -29,7 +29,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from bench import cache
+from bench import cache, provenance
 
 # CPU cores a training task asks for, per preset; torch runs that many threads.
 TASK_CPUS = {"tiny": 1, "cpu": 2, "paper": 8}
@@ -51,9 +51,10 @@ def task_resources(preset: str, torch_device: str | None, cluster_gpus: float) -
 
 
 def _train(plan: cache.ModelPlan, teacher_baked: bytes | None, torch_device: str | None,
-           threads: int):
+           threads: int, revision: str):
     """The task body: train ``plan`` in a temporary folder; returns (the baked model's
-    bytes, ({path relative to the model folder: bytes}, the cache record))."""
+    bytes, ({path relative to the model folder: bytes}, the cache record)); ``revision``:
+    the driver's git revision (a cluster's workers run an uploaded copy without .git)."""
     import torch
 
     torch.set_num_threads(threads)
@@ -66,7 +67,8 @@ def _train(plan: cache.ModelPlan, teacher_baked: bytes | None, torch_device: str
         if teacher_baked is not None:
             teacher = Path(tmp) / "teacher.npz"
             teacher.write_bytes(teacher_baked)
-        record = cache.train_into(plan, folder, teacher, torch_device, progress=False)
+        record = cache.train_into(plan, folder, teacher, torch_device, progress=False,
+                                  revision=revision)
         files = {str(f.relative_to(folder)): f.read_bytes()
                  for f in sorted(folder.rglob("*")) if f.is_file()}
     return files["model.npz"], (files, record)
@@ -108,6 +110,7 @@ class Session:
         ray.init(address=self.address, runtime_env=env, log_to_driver=False,
                  include_dashboard=False, logging_level="WARNING")
         self.ray, self.gpus = ray, ray.cluster_resources().get("GPU", 0.0)
+        self.revision = provenance.git_revision()
         self.remote = ray.remote(max_retries=MAX_RETRIES, num_returns=2)(_train)
         return self
 
@@ -161,7 +164,7 @@ class Session:
         res = task_resources(plan.preset, self.torch_device, self.gpus)
         bytes_ref, rest_ref = self.remote.options(**res).remote(
             plan, None if teacher is None else baked[teacher.key], self.torch_device,
-            res["num_cpus"])
+            res["num_cpus"], self.revision)
         if plan.key in self._teachers:     # students' bytes are not kept in the store
             baked[plan.key] = bytes_ref
         running[rest_ref] = (plan, held)

@@ -37,9 +37,10 @@ def versions() -> dict[str, str]:
     return found
 
 
-def trained_by(torch_device: str, torch_threads: int) -> dict:
+def trained_by(torch_device: str, torch_threads: int, revision: str | None = None) -> dict:
     """The record of the process training a model now: host, pid, torch device and threads,
-    library versions, git revision."""
+    library versions, git revision (``revision``: the driver's, for code a Ray worker runs
+    from an uploaded copy without ``.git``; default this checkout's)."""
     return {"host": socket.gethostname(), "pid": os.getpid(), "torch_device": torch_device,
             "torch_threads": int(torch_threads), "versions": versions(),
-            "git_revision": git_revision()}
+            "git_revision": revision or git_revision()}
