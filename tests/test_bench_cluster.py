@@ -26,7 +26,7 @@ from filelock import Timeout
 from bench import cache, cluster, run
 from clrender.atomic import _TEMPORARY, remove_leftovers
 from clrender.data import make_scene
-from tests.deps import require
+from deps import require
 
 REPO = Path(__file__).resolve().parent.parent
 QUALITY = ("PSNR", "SSIM", "LPIPS")
