@@ -1,9 +1,18 @@
-"""Cached scenes and trained/baked models for the benchmark harness.
+"""Cached scenes and trained/baked models for the benchmark harness, safe for many writers.
 
 Models are keyed by a hash of everything that determines them (the method's model and
 training config, data fingerprint, seed, teacher), so tables that share a row configuration
 share a model (table2's L=4 row is table3's Separate-Att (V) row and table4's L=4 rows; every
 NDRF row of a scene shares its NGP-RT teacher).
+
+Layout under the root: ``models/<key>/`` (``run/``, ``model.npz``, ``meta.json`` written
+last and atomically: a model is cached once its ``meta.json`` exists), ``scenes/<name>/``,
+and ``trainings.jsonl`` (one line per finished training: key, method, seed, host, pid).
+Any number of processes (bench.run, Ray tasks' drivers) may share a root on one machine's
+file system: a model or a built-in scene is made under its own lock (``filelock``, an
+``flock`` the kernel releases when its holder dies, so a killed process's lock is never
+stale), and whoever waited finds it made. File locks are not trusted across the nodes of a
+network file system: there, one driver owns the cache (bench/cluster.py).
 """
 from __future__ import annotations
 
@@ -13,11 +22,14 @@ import os
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from filelock import FileLock
+
+from bench import provenance
 from clrender import methods
-from clrender.atomic import write_atomic
+from clrender.atomic import remove_leftovers, write_atomic
 
 BUILTIN_SCENES = {"builtin-bounded": "bounded", "builtin-unbounded": "unbounded"}
 
@@ -35,20 +47,38 @@ def resolve_scene(scene: str, root: Path) -> Path:
     generator changed) or a path."""
     if scene in BUILTIN_SCENES:
         path = root / "scenes" / f"{scene}-seed0"
-        if not _is_current(path, BUILTIN_SCENES[scene]):
-            from clrender.data import make_scene
-
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=".tmp-scene-"))
-            make_scene(BUILTIN_SCENES[scene], tmp, seed=0)
-            shutil.rmtree(path, ignore_errors=True)
-            os.replace(tmp, path)
+        if _is_current(path, BUILTIN_SCENES[scene]):
+            return path
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with lock(path.parent / f"{path.name}.lock"):
+            if not _is_current(path, BUILTIN_SCENES[scene]):     # made while we waited?
+                _make_scene(BUILTIN_SCENES[scene], path)
         return path
     path = Path(scene)
     if not path.is_dir():
         raise ValueError(f"--scene {scene!r}: neither a built-in scene "
                          f"({', '.join(BUILTIN_SCENES)}) nor a dataset folder")
     return path
+
+
+def lock(path: Path) -> FileLock:
+    """The lock file ``path`` (held with ``with``; blocks until free)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return FileLock(str(path))
+
+
+def _make_scene(kind: str, path: Path) -> None:
+    """Generate a built-in scene into ``path`` (its lock held): in a temporary folder, then
+    renamed, after clearing the folders of this scene's generators killed mid-way."""
+    from clrender.data import make_scene
+
+    prefix = f".tmp-scene-{path.name}-"
+    for stale in path.parent.glob(f"{prefix}*"):
+        shutil.rmtree(stale, ignore_errors=True)
+    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=prefix))
+    make_scene(kind, tmp, seed=0)
+    shutil.rmtree(path, ignore_errors=True)
+    os.replace(tmp, path)
 
 
 def _is_current(path: Path, kind: str) -> bool:
@@ -76,28 +106,59 @@ def data_fingerprint(path: Path, downscale: int = 1) -> str:
 
 @dataclass(frozen=True)
 class ModelEntry:
-    """A trained and baked model in the cache."""
+    """A trained and baked model in the cache; ``trained_by``: what trained it (host,
+    preset, seed, versions, git revision; {} for models cached before it was recorded)."""
 
     key: str
     baked: Path
     run_dir: Path
     train_minutes: float
+    trained_by: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ModelPlan:
+    """A model a table row needs, before it is trained: what :func:`train_into` trains.
+
+    Attributes:
+        key: the cache key (a hash of ``spec``); ``folder`` its cache folder.
+        options: the method's training options, ``teacher`` left out (``teacher`` is the
+            teacher's own plan, or None).
+        fingerprint: :func:`data_fingerprint` of ``data`` read at ``downscale``.
+    """
+
+    key: str
+    spec: dict
+    folder: Path
+    data: Path
+    fingerprint: str
+    downscale: int
+    preset: str
+    method: str
+    options: dict
+    seed: int
+    teacher: "ModelPlan | None"
+
+    @property
+    def cached(self) -> bool:
+        return (self.folder / "meta.json").is_file()
+
+    def lock(self) -> FileLock:
+        return lock(self.folder / ".lock")
 
 
 def _model_key(spec: dict) -> str:
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, method: str,
-                 options: dict, seed: int = 0, torch_device: str | None = None,
-                 downscale: int = 1) -> ModelEntry:
-    """Train (if missing) and bake (if missing) the model of one table row.
+def plan_model(root: Path, data: Path, fingerprint: str, preset: str, method: str,
+               options: dict, seed: int = 0, downscale: int = 1) -> ModelPlan:
+    """The :class:`ModelPlan` of one table row's model (and of its teacher, nested).
 
     Args:
         method: the row's method; ``options`` its model options. An option ``teacher``
-            (a dict of model options of the method's ``TEACHER`` method) names a teacher
-            that is ensured first (cached like any model) and handed to the method's
-            training as a baked file.
+            (a dict of model options of the method's ``TEACHER`` method) names a teacher,
+            planned (and cached) like any model and handed to the training as a baked file.
         fingerprint, downscale: :func:`data_fingerprint` of ``data`` read at ``downscale``.
     """
     plugin = methods.get(method)
@@ -109,26 +170,85 @@ def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, method: 
     if "teacher" in options:
         if plugin.TEACHER is None:
             raise ValueError(f"method {method!r} takes no teacher")
-        teacher = ensure_model(root, data, fingerprint, preset, plugin.TEACHER,
-                               options.pop("teacher"), seed=seed, torch_device=torch_device,
-                               downscale=downscale)
+        teacher = plan_model(root, data, fingerprint, preset, plugin.TEACHER,
+                             options.pop("teacher"), seed=seed, downscale=downscale)
     spec = {**plugin.model_spec(preset, **options), "data": fingerprint, "seed": seed}
     if teacher is not None:
         spec["teacher"] = teacher.key
     key = _model_key(spec)
-    folder = root / "models" / key
-    meta_path, baked = folder / "meta.json", folder / "model.npz"
-    if not meta_path.is_file():
-        folder.mkdir(parents=True, exist_ok=True)
-        start = time.perf_counter()
-        if teacher is not None:
-            options["teacher"] = str(teacher.baked)
-        plugin.train(str(data), folder / "run", preset, seed=seed, torch_device=torch_device,
-                     downscale=downscale, **options)
-        minutes = (time.perf_counter() - start) / 60.0
-        plugin.bake_run(folder / "run", baked)
-        write_atomic(meta_path, json.dumps({"spec": spec, "train_minutes": minutes}, indent=2))
-    elif not baked.is_file():
-        plugin.bake_run(folder / "run", baked)
-    meta = json.loads(meta_path.read_text())
-    return ModelEntry(key, baked, folder / "run", float(meta["train_minutes"]))
+    return ModelPlan(key, spec, Path(root) / "models" / key, Path(data), fingerprint, downscale,
+                     preset, method, options, seed, teacher)
+
+
+def ensure_model(root: Path, data: Path, fingerprint: str, preset: str, method: str,
+                 options: dict, seed: int = 0, torch_device: str | None = None,
+                 downscale: int = 1) -> ModelEntry:
+    """Train (if missing) and bake (if missing) the model of one table row, in this
+    process, its teacher first; arguments as :func:`plan_model`."""
+    return ensure(plan_model(root, data, fingerprint, preset, method, options, seed=seed,
+                             downscale=downscale), torch_device)
+
+
+def ensure(plan: ModelPlan, torch_device: str | None = None) -> ModelEntry:
+    """The cached model of ``plan``, trained here (in its cache folder, under its lock,
+    resuming a checkpoint a killed run left) when no process has cached it yet."""
+    teacher = ensure(plan.teacher, torch_device) if plan.teacher is not None else None
+    with plan.lock():
+        if not plan.cached:
+            remove_leftovers(plan.folder)
+            remove_leftovers(plan.folder / "run")
+            record = train_into(plan, plan.folder, teacher and teacher.baked, torch_device)
+            commit(plan, {}, record)
+        elif not (plan.folder / "model.npz").is_file():
+            methods.get(plan.method).bake_run(plan.folder / "run", plan.folder / "model.npz")
+    return entry(plan)
+
+
+def train_into(plan: ModelPlan, folder: Path, teacher_baked: Path | None,
+               torch_device: str | None = None, progress: bool = True,
+               revision: str | None = None) -> dict:
+    """Train ``plan`` into ``folder/run`` and bake ``folder/model.npz``; returns the
+    record :func:`commit` stores (``spec``, ``train_minutes``, ``trained_by``;
+    ``revision``: see :func:`bench.provenance.trained_by`)."""
+    import torch
+
+    from clrender.runs import pick_device
+
+    plugin, options = methods.get(plan.method), dict(plan.options)
+    if plan.teacher is not None:
+        options["teacher"] = str(teacher_baked)
+    resumed = (folder / "run" / "checkpoint.pt").is_file()
+    start = time.perf_counter()
+    plugin.train(str(plan.data), folder / "run", plan.preset, seed=plan.seed,
+                 torch_device=torch_device, progress=progress, downscale=plan.downscale,
+                 **options)
+    minutes = (time.perf_counter() - start) / 60.0
+    plugin.bake_run(folder / "run", folder / "model.npz")
+    who = provenance.trained_by(str(pick_device(torch_device)), torch.get_num_threads(),
+                                revision)
+    return {"spec": plan.spec, "train_minutes": minutes,
+            "trained_by": {**who, "method": plan.method, "preset": plan.preset,
+                           "seed": plan.seed, "resumed_checkpoint": resumed}}
+
+
+def commit(plan: ModelPlan, files: dict[str, bytes], record: dict) -> None:
+    """Store ``files`` ({path relative to the model folder: bytes}, each written
+    atomically) then ``meta.json`` (the model is cached from then on) and a line of
+    ``trainings.jsonl``. The caller holds ``plan``'s lock."""
+    for rel, data in sorted(files.items()):
+        write_atomic(plan.folder / rel, data)
+    write_atomic(plan.folder / "meta.json", json.dumps(record, indent=2))
+    line = {"key": plan.key, "method": plan.method, "seed": plan.seed,
+            "host": record["trained_by"]["host"], "pid": record["trained_by"]["pid"],
+            "train_minutes": record["train_minutes"]}
+    root = plan.folder.parent.parent
+    with lock(root / "trainings.jsonl.lock"), open(root / "trainings.jsonl", "a") as log:
+        log.write(json.dumps(line) + "\n")
+
+
+def entry(plan: ModelPlan) -> ModelEntry:
+    """The cached :class:`ModelEntry` of ``plan`` (its ``meta.json`` must exist)."""
+    meta = json.loads((plan.folder / "meta.json").read_text())
+    return ModelEntry(plan.key, plan.folder / "model.npz", plan.folder / "run",
+                      float(meta["train_minutes"]), meta.get("trained_by", {}))
+

@@ -7,44 +7,46 @@
     python -m bench.run --list
     python -m bench.run train-curve         # test PSNR vs training minutes, `cpu` and `tiny`
     python -m bench.run train-curve --method ndrf --preset tiny
+    python -m bench.run table3 --seeds 3 --executor ray [--address auto]   # rows as Ray tasks
 
 Trains what is missing (models cached by a hash of config and data, shared across
 tables), bakes, renders every test view with the OpenCL renderer and writes
 ``results/TABLE.{md,csv,json,png}`` plus a sample render per row, then
-``results/README.md`` listing every table found there. ``train-curve``
+``results/README.md`` listing every table found there. With ``--executor ray`` the missing
+models are trained as Ray tasks first (bench/cluster.py), then measured here. ``train-curve``
 (bench/train_curve.py) writes ``results/train-curve.{csv,png}``.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
-import subprocess
 import sys
 from pathlib import Path
 
 from tqdm import tqdm
 
-from bench import ablation, cache, report, seeds, train_curve
+from bench import ablation, cache, cluster, provenance, report, seeds, train_curve
 from clrender import methods
 from clrender.cliopts import whole_number
 
 
-def _git_revision() -> str:
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, check=True, cwd=Path(__file__).parent).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
-def run_table(table, data: Path, fingerprint: str, args, meta: dict) -> str:
-    """Train/bake what is missing, measure every row for each seed, write the table's files."""
+def run_table(table, data: Path, fingerprint: str, args, meta: dict,
+              session: cluster.Session | None = None) -> str:
+    """Train/bake what is missing (as Ray tasks of ``session`` first, when given), measure
+    every row for each seed, write the table's files (their JSON lists the cache entries
+    used, each with what trained it)."""
     from bench.measure import measure_row
     from clrender.data import load_dataset
 
     test_set = load_dataset(data, split="test", downscale=args.downscale)
     seed_list = list(range(args.seed, args.seed + args.seeds))
-    results = []
+    if session is not None:
+        session.train_all([cache.plan_model(args.cache, data, fingerprint,
+                                            args.preset or table.preset, row.method, row.model,
+                                            seed=seed, downscale=args.downscale)
+                           for row in table.rows for seed in seed_list], f"{table.key} train")
+    results, used = [], {}
     with tqdm(total=len(table.rows) * len(seed_list), desc=table.key, unit="model") as bar:
         for row in table.rows:
             per_seed = []
@@ -56,10 +58,12 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict) -> str:
                 m = measure_row(entry.baked, test_set, row.render, device=args.device,
                                 repeats=args.repeats, timing_sizes=table.timing_sizes)
                 per_seed.append(m.of_model(entry.train_minutes, entry.key))
+                used[entry.key] = entry.trained_by
                 bar.update()
             results.append(seeds.aggregate(per_seed, seed_list))
     cam = test_set.cameras[0]
-    meta = {**meta, "resolution": f"{cam.width}x{cam.height}"}
+    meta = {**meta, "resolution": f"{cam.width}x{cam.height}",
+            "cache": {"root": str(args.cache), "models": used}}
     return report.write_table(args.out, table, results, meta)
 
 
@@ -85,7 +89,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--device", default=None, help="OpenCL device spec (see `clrender info`)")
     p.add_argument("--torch-device", default=None, help="torch device for training")
     p.add_argument("--out", type=Path, default=Path("results"))
-    p.add_argument("--cache", type=Path, default=None, help="model/scene cache folder")
+    p.add_argument("--cache", type=Path, default=None,
+                   help="model/scene cache folder (default $CLRENDER_CACHE, else "
+                        "~/.cache/clrender); with --executor ray the driver's")
+    p.add_argument("--executor", choices=("inprocess", "ray"), default="inprocess",
+                   help="where missing models train: one after another in this process "
+                        "(default), or as Ray tasks (pip install 'clrender[cluster]')")
+    p.add_argument("--address", default=None,
+                   help="--executor ray: the cluster to join (`auto`, `ray://HOST:PORT`); "
+                        "default: a local Ray instance on this machine's cores")
     p.add_argument("--repeats", type=int, default=5, help="timing passes per row")
     p.add_argument("--seed", type=int, default=0, help="training seed (the first one)")
     p.add_argument("--seeds", type=whole_number("seeds"), default=1,
@@ -115,25 +127,34 @@ def main(argv=None) -> int:
         if args.downscale < 1 or (curve and args.downscale != 1):
             raise ValueError(f"--downscale {args.downscale}: expected a whole number >= 1, "
                              f"for tables only (not {train_curve.KEY})")
+        if (curve or args.executor != "ray") and args.address is not None:
+            raise ValueError("--address is for --executor ray")
+        if curve and args.executor == "ray":
+            raise ValueError(f"--executor ray is for tables, not {train_curve.KEY}")
         args.cache = args.cache or cache.cache_root()
         from clrender.device import get_runtime
 
-        meta = {"device": get_runtime(args.device).name, "git_revision": _git_revision(),
+        meta = {"device": get_runtime(args.device).name, "git_revision": provenance.git_revision(),
                 "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
         if curve:
             print(train_curve.run(args, meta))
-        for table in tables:
-            scene = args.scene or table.scene
-            data = cache.resolve_scene(scene, args.cache)
-            fingerprint = cache.data_fingerprint(data, args.downscale)
-            meta.update(preset=args.preset or table.preset, scene=scene if args.downscale == 1
-                        else f"{scene} (downscale {args.downscale})")
-            print(run_table(table, data, fingerprint, args, meta))
+        with (cluster.Session(args.address, args.torch_device) if args.executor == "ray"
+              else contextlib.nullcontext()) as session:
+            for table in tables:
+                scene = args.scene or table.scene
+                data = cache.resolve_scene(scene, args.cache)
+                fingerprint = cache.data_fingerprint(data, args.downscale)
+                meta.update(preset=args.preset or table.preset, scene=scene
+                            if args.downscale == 1 else f"{scene} (downscale {args.downscale})")
+                print(run_table(table, data, fingerprint, args, meta, session))
         report.write_index(args.out)
         print(f"results written to {args.out}/")
     except ValueError as exc:
         print(f"bench.run: error: {exc}", file=sys.stderr)
         return 2
+    except cluster.TaskFailed as exc:
+        print(f"bench.run: error: {exc}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -3,9 +3,14 @@ folder, then a rename over the target (``os.replace`` is atomic on one file syst
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from pathlib import Path
 from typing import Callable
+
+
+# atomic_write's temporary names: "." + target name + "." + mkstemp's 8 characters + suffix.
+_TEMPORARY = re.compile(r"^\.(?P<name>.+)\.[a-z0-9_]{8}(?P<suffix>\.[^.]*)?$")
 
 
 def atomic_write(path, write: Callable[[Path], None]) -> Path:
@@ -36,3 +41,16 @@ def write_atomic(path, data: bytes | str) -> Path:
     """Write bytes or text (UTF-8) to ``path`` atomically; see :func:`atomic_write`."""
     raw = data.encode() if isinstance(data, str) else data
     return atomic_write(path, lambda tmp: tmp.write_bytes(raw))
+
+
+def remove_leftovers(folder) -> list[Path]:
+    """Delete the temporary files :func:`atomic_write` left in ``folder`` (not below it)
+    when its process was killed mid-write; returns them. Only safe while no other process
+    writes to ``folder`` (hold its lock)."""
+    folder, removed = Path(folder), []
+    for f in sorted(folder.iterdir()) if folder.is_dir() else ():
+        m = _TEMPORARY.match(f.name)
+        if m and f.is_file() and (m["suffix"] or "") == Path(m["name"]).suffix:
+            f.unlink()
+            removed.append(f)
+    return removed

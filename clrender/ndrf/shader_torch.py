@@ -178,11 +178,19 @@ class ViewSet:
 
     @classmethod
     def build(cls, meshes, cameras, images, device) -> "ViewSet":
+        """Cast every view's hits once into arrays allocated once (hits gathered in a list
+        and then stacked were held twice): (K x 12 + 12) bytes a pixel with the float32
+        target, 23 MB a view at 800x800 with K = 2."""
         caster = HitCaster(meshes)
-        hits = [caster.cast_camera(c) for c in cameras]
+        first = caster.cast_camera(cameras[0])
+        tri = np.empty((len(cameras),) + first.tri.shape, np.int32)
+        bary = np.empty((len(cameras),) + first.bary.shape, F32)
+        for i, camera in enumerate(cameras):
+            hits = first if i == 0 else caster.cast_camera(camera)
+            tri[i], bary[i] = hits.tri, hits.bary
         as_t = lambda a: torch.as_tensor(np.ascontiguousarray(a), device=device)  # noqa: E731
-        return cls(as_t(np.stack([h.tri for h in hits])), as_t(np.stack([h.bary for h in hits])),
-                   as_t(images), as_t(np.stack([c.packed() for c in cameras])))
+        return cls(as_t(tri), as_t(bary), as_t(images),
+                   as_t(np.stack([c.packed() for c in cameras])))
 
     def __len__(self) -> int:
         return len(self.tri)

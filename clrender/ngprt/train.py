@@ -127,7 +127,7 @@ class OccupancyGrid:
         n = self.R ** 3
         dev = self.ema.device
         if step < warmup:
-            cells = torch.arange(n, device=dev)
+            cells = None      # every cell, a chunk at a time (not 2^27 int64, 1 GB, at once)
         else:
             m = max(1, int(n * fraction))
             occupied = torch.nonzero(self.binary.reshape(-1))[:, 0]
@@ -136,8 +136,9 @@ class OccupancyGrid:
             cells = torch.cat([torch.randint(n, (m,), device=dev), pick])
         # Every corner once when the corner grid is small (CPU presets); per chunk otherwise.
         corner_grid = model.all_corner_values() if (self.R + 1) ** 3 <= 1 << 23 else None
-        for i in range(0, len(cells), chunk):
-            c = cells[i:i + chunk]
+        for i in range(0, n if cells is None else len(cells), chunk):
+            c = torch.arange(i, min(i + chunk, n), device=dev) if cells is None \
+                else cells[i:i + chunk]
             ijk = torch.stack([c // (self.R * self.R), (c // self.R) % self.R, c % self.R], -1)
             u = (ijk.to(torch.float32) + torch.rand(len(c), 3, device=dev)) / self.R
             alpha = model.sample(u, corner_grid)[0] * self.cfg.s0 * self._step_scale(u)
