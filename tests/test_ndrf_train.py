@@ -7,8 +7,6 @@ Tolerances:
 - model -> torch shader -> baked arrays: bit-equal;
 - a full frame shaded on its coverage box only (training's full-frame path) vs the whole
   frame: values and the loss's gradients within 1e-5 (max abs; float32 sums reordered);
-- teacher-initialised features: per channel mean 0 (1e-6), std 0.1 (relative 1e-4), an
-  increasing affine map of the teacher's channel (correlation > 1 - 1e-6);
 - distillation cameras: r, theta, phi within the training cameras' ranges up to 1e-9 rad /
   world units, optical axis through the centre within 1e-9 (cosine);
 - end-to-end (slow): the baked student beats a constant colour (the mean training pixel) by
@@ -126,29 +124,6 @@ def test_coverage_boxes():
     tri[0, 1, 1, 2] = tri[0, 0, 3, 4] = 7
     tri[2, :, :, :] = 0
     assert coverage_boxes(tri).tolist() == [[1, 2, 3, 3], [0, 0, 5, 6], [0, 0, 5, 6]]
-
-
-def test_teacher_features_are_the_teachers_standardised():
-    from clrender.ndrf.init import FEATURE_STD, initial_model, teacher_features
-    from clrender.ngprt.config import preset as ngprt_preset
-    from clrender.ngprt.random_model import random_baked_model
-    from clrender.ngprt.render_ref import features
-    from clrender.ngprt.space import to_grid
-
-    teacher = random_baked_model(ngprt_preset("tiny", variant="sum"), seed=5)
-    verts = np.random.default_rng(2).uniform(-0.9, 0.9, (500, 3)).astype(np.float32)
-    f = teacher_features(teacher, verts)
-    assert f.shape == (500, 8) and f.dtype == np.float32
-    np.testing.assert_allclose(f.mean(0), 0.0, atol=1e-6)
-    np.testing.assert_allclose(f.std(0), FEATURE_STD, rtol=1e-4)
-    raw = features(teacher, to_grid(verts, teacher.config.extent, False))
-    for c in range(8):      # an increasing affine map of the teacher's channel
-        assert np.corrcoef(raw[:, c], f[:, c])[0, 1] > 1 - 1e-6, c
-    faces = np.array([[0, 1, 2]], np.int32)
-    model = initial_model(NDRFConfig(thresholds=(1e-2,)), [(verts, faces)], features=[f])
-    assert np.array_equal(model.arrays["features_0"], f)
-    with pytest.raises(ValueError, match="feature_init"):
-        configs("tiny", train_config=TrainConfig(feature_init="mean"))
 
 
 def _ring_cameras(az_deg, el_deg, radius, up=(0.0, 0.0, 1.0)):

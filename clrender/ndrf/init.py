@@ -22,34 +22,13 @@ F32 = np.float32
 FEATURE_STD = 0.1
 
 
-def teacher_features(teacher, vertices: np.ndarray) -> np.ndarray:
-    """(V, 8) float32 initial features from a baked NGP-RT teacher: its features at the
-    vertices (sigma logit, diffuse, specular: NGP-RT Eq. 6, numpy reference), each channel
-    standardised over the vertices to mean 0 and standard deviation ``FEATURE_STD``.
-
-    Args:
-        teacher: a bounded :class:`clrender.ngprt.baked.BakedModel`;
-        vertices: (V, 3) world units (clamped into the teacher's box).
-    """
-    from ..ngprt.render_ref import features
-    from ..ngprt.space import to_grid
-
-    u = np.clip(to_grid(np.asarray(vertices, F32), teacher.config.extent, False), 0.0, 1.0)
-    f = np.zeros((0, FEATURES), np.float64) if len(u) == 0 else \
-        features(teacher, u).astype(np.float64)
-    f = (f - f.mean(0)) / np.maximum(f.std(0), 1e-6) if len(f) > 1 else f * 0.0
-    return (FEATURE_STD * f).astype(F32)
-
-
 def initial_model(config: NDRFConfig, meshes, seed: int = 0,
-                  background=(1.0, 1.0, 1.0), features=None) -> NDRFModel:
-    """An :class:`NDRFModel` with random (or given) features and random shader weights.
+                  background=(1.0, 1.0, 1.0)) -> NDRFModel:
+    """An :class:`NDRFModel` with random features and shader weights.
 
     Args:
         meshes: K pairs ``(vertices (V, 3), faces (F, 3))``, outer (lowest threshold) first.
         background: RGB in [0, 1] stored with the model.
-        features: K arrays (V_k, 8) to start from (e.g. :func:`teacher_features`); None:
-            N(0, FEATURE_STD^2).
     """
     if len(meshes) != config.K:
         raise ValueError(f"{len(meshes)} meshes for K={config.K} thresholds {config.thresholds}")
@@ -58,9 +37,8 @@ def initial_model(config: NDRFConfig, meshes, seed: int = 0,
     for k, (vertices, faces) in enumerate(meshes):
         arrays[f"vertices_{k}"] = np.ascontiguousarray(vertices, F32)
         arrays[f"faces_{k}"] = np.ascontiguousarray(faces, np.int32)
-        noise = (FEATURE_STD * rng.standard_normal((len(vertices), FEATURES))).astype(F32)
-        arrays[f"features_{k}"] = noise if features is None else \
-            np.ascontiguousarray(features[k], F32).reshape(len(vertices), FEATURES)
+        arrays[f"features_{k}"] = (FEATURE_STD * rng.standard_normal(
+            (len(vertices), FEATURES))).astype(F32)
     S, H = config.kernel_size, config.hidden
     for name, (c_in, c_out) in (("conv0", (config.c_in, H)), ("conv1", (H, 3))):
         bound = 1.0 / np.sqrt(S * S * c_in)

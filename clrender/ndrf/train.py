@@ -35,7 +35,7 @@ import torch.nn.functional as F
 from ..runs import RunFolder, mse_psnr, pick_device, set_lr
 from .baked import NDRFModel, save_baked, validate
 from .config import NDRFConfig, preset as ndrf_preset
-from .init import initial_model, load_meshes, teacher_features
+from .init import initial_model, load_meshes
 from .mesh import extract_preset
 from .shader_torch import NDRFShader, ViewSet
 
@@ -61,8 +61,6 @@ class TrainConfig:
         betas, eps: Adam's.
         extract: the mesh extraction preset (:data:`clrender.ndrf.mesh.PRESETS`).
         face_budget: faces per mesh after decimation; None: the extraction preset's.
-        feature_init: "random" (N(0, 0.1^2)) or "teacher" (the teacher's features at the
-            vertices, standardised: :func:`clrender.ndrf.init.teacher_features`).
         checkpoint_every, log_every: in iterations.
     """
 
@@ -77,7 +75,6 @@ class TrainConfig:
     eps: float = 1e-8
     extract: str = "paper"
     face_budget: int | None = None
-    feature_init: str = "random"
     checkpoint_every: int = 5000
     log_every: int = 100
 
@@ -115,8 +112,6 @@ def configs(preset: str, iterations: int | None = None, train_config: TrainConfi
         tcfg = replace(tcfg, distill=bool(options["distill"]))
     if iterations is not None:
         tcfg = replace(tcfg, iterations=int(iterations))
-    if tcfg.feature_init not in ("random", "teacher"):
-        raise ValueError(f"feature_init {tcfg.feature_init!r}: expected 'random' or 'teacher'")
     budget = {} if tcfg.face_budget is None else {"face_budget": tcfg.face_budget}
     return cfg, tcfg, extract_preset(tcfg.extract, **budget)
 
@@ -233,9 +228,7 @@ def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None
     run.write_config()
 
     bg = np.asarray(ds.background, np.float32).reshape(3)
-    init = None if tcfg.feature_init == "random" else \
-        [teacher_features(teacher_model, v) for v, _ in meshes]
-    shader = NDRFShader.from_model(initial_model(cfg, meshes, seed, bg, init)).to(dev)
+    shader = NDRFShader.from_model(initial_model(cfg, meshes, seed, bg)).to(dev)
     views = {"train": ViewSet.build(meshes, ds.cameras, ds.images, dev)}
     if tcfg.distill and tcfg.n_distill > 0:
         from .distill import cached_distillation
