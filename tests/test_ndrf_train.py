@@ -5,6 +5,8 @@ Tolerances:
   difference 1e-5, full frames and random patches (border patches included), K = 1, 2, 3,
   kernel sizes 2 and 1;
 - model -> torch shader -> baked arrays: bit-equal;
+- a full frame shaded on its coverage box only (training's full-frame path) vs the whole
+  frame: values and the loss's gradients within 1e-5 (max abs; float32 sums reordered);
 - distillation cameras: r, theta, phi within the training cameras' ranges up to 1e-9 rad /
   world units, optical axis through the centre within 1e-9 (cosine);
 - end-to-end (slow): the baked student beats a constant colour (the mean training pixel) by
@@ -26,7 +28,7 @@ from clrender.ndrf.distill import (azimuth_arc, cached_distillation, distillatio
 from clrender.ndrf.hits import HitCaster
 from clrender.ndrf.random_model import random_ndrf_model
 from clrender.ndrf.shader_ref import shade_reference
-from clrender.ndrf.shader_torch import NDRFShader, crop, shade_image
+from clrender.ndrf.shader_torch import NDRFShader, ViewSet, coverage_boxes, crop, shade_image
 from clrender.ndrf.train import MODEL_OPTIONS, TrainConfig, configs, learning_rate, model_spec
 
 TOL = 1e-5
@@ -91,6 +93,37 @@ def test_shader_gradients_reach_features_and_weights():
     seen = np.unique(model.arrays["faces_0"][hits.tri[0][hits.tri[0] >= 0]])
     unseen = np.setdiff1d(np.arange(len(model.arrays["vertices_0"])), seen)
     assert shader.features[0].grad[unseen].abs().sum() == 0
+
+
+@pytest.mark.parametrize("S", [2, 1])
+def test_coverage_box_frame_equals_full_frame(S):
+    model = random_ndrf_model(NDRFConfig(kernel_size=S), seed=11 + S)
+    cam = Camera.from_fov(np.deg2rad(30.0), 48, 40, look_at([0.0, -4.5, 1.0], [0.2, 0, 0]))
+    meshes = [model.mesh(k)[:2] for k in range(model.config.K)]
+    target = np.random.default_rng(1).uniform(0, 1, (1, 40, 48, 3)).astype(np.float32)
+    vs = ViewSet.build(meshes, [cam], target, "cpu")
+    y0, x0, h, w = vs.boxes[0]
+    assert 0 < h * w < 40 * 48 * 0.8                  # the box leaves pixels out
+    bg = torch.as_tensor(model.background)
+    grads = []
+    for full in (True, False):
+        shader = NDRFShader.from_model(model)
+        if full:
+            _, dirs = generate_rays(cam)
+            rgb = shade_image(shader, vs.tri[0], vs.bary[0], torch.as_tensor(dirs), bg)
+        else:
+            rgb = vs.frame(shader, 0, bg)
+        torch.nn.functional.mse_loss(rgb, vs.images[0]).backward()
+        grads.append([rgb.detach()] + [p.grad.clone() for p in shader.parameters()])
+    for a, b in zip(*grads):
+        np.testing.assert_allclose(a.numpy(), b.numpy(), rtol=0, atol=TOL)
+
+
+def test_coverage_boxes():
+    tri = np.full((3, 2, 5, 6), -1, np.int32)
+    tri[0, 1, 1, 2] = tri[0, 0, 3, 4] = 7
+    tri[2, :, :, :] = 0
+    assert coverage_boxes(tri).tolist() == [[1, 2, 3, 3], [0, 0, 5, 6], [0, 0, 5, 6]]
 
 
 def _ring_cameras(az_deg, el_deg, radius, up=(0.0, 0.0, 1.0)):

@@ -267,8 +267,11 @@ def _loop(shader, opt, views, bg, start, tcfg, seed, run, progress, on_step=None
         y0, x0 = int(rng.integers(vs.height - ph + 1)), int(rng.integers(vs.width - pw + 1))
         lr = learning_rate(step, tcfg)
         set_lr(opt, lr)
-        inputs = vs.window(i, y0, x0, ph, pw, shader.config.kernel_size - 1)
-        rgb = shader(*inputs, background=bg)
+        if tcfg.patch <= 0:
+            rgb = vs.frame(shader, i, bg)
+        else:
+            rgb = shader(*vs.window(i, y0, x0, ph, pw, shader.config.kernel_size - 1),
+                         background=bg)
         target = vs.images[i, y0:y0 + ph, x0:x0 + pw].float()
         loss = F.mse_loss(rgb, target)
         opt.zero_grad(set_to_none=True)
