@@ -195,10 +195,12 @@ inline void row_span(const Tri *t, const float *rest, const float *inv_c0, float
         else if (c0 < 0.0f) a_hi = fmin(a_hi, -rest[e] * inv_c0[e]);
         else if (rest[e] < 0.0f) a_hi = -INFINITY;
     }
-    /* a to pixel columns, clamped as floats first (a may be +-inf). */
-    const float l = fmax(floor(fmax(a_lo * fx + cx, (float)x0) - 0.5f) - 1.0f, (float)x0);
-    const float h = fmin(ceil(fmin(a_hi * fx + cx, (float)x1 + 1.0f) - 0.5f) + 1.0f,
-                         (float)x1);
+    /* a to pixel columns, clamped into [x0 - 1, x1 + 1] as floats first (a may be +-inf
+     * or NaN: a huge vertex), so the int conversion is defined. */
+    const float l = fmin(fmax(floor(a_lo * fx + cx - 0.5f) - 1.0f, (float)x0),
+                         (float)x1 + 1.0f);
+    const float h = fmax(fmin(ceil(a_hi * fx + cx - 0.5f) + 1.0f, (float)x1),
+                         (float)x0 - 1.0f);
     *lo = (int)l;
     *hi = a_lo <= a_hi ? (int)h : (int)l - 1;
 }
