@@ -1,13 +1,17 @@
-/* NDRF visibility-buffer rasteriser (docs/ndrf.md "Hits"); mirrors the Embree first hits of
- * clrender/ndrf/hits.py, which the tests hold it to:
- *   ndrf_raster_clear  every pixel of every mesh: no hit yet.
- *   ndrf_raster_tris   per triangle (all K meshes, faces concatenated): to camera space,
- *                      screen bounding box; a box of at most TILE^2 pixels is covered
- *                      here, row by row over the span its edges allow (row_span), a larger
- *                      one is binned as (triangle, TILE x TILE screen tile) pairs.
- *   ndrf_raster_tiles  per binned pair: the triangle over the tile's pixels.
- *   ndrf_resolve       per pixel and mesh: triangle id, Embree (u, v) and depth along the
- *                      unit ray, recomputed from the pixel ray and the triangle.
+/* NDRF visibility-buffer rasteriser (docs/ndrf.md "Hits"), binned into screen tiles; mirrors
+ * the Embree first hits of clrender/ndrf/hits.py, which the tests hold it to:
+ *   ndrf_raster_clear  the tiles' triangle counts = 0.
+ *   ndrf_raster_setup  per triangle (all K meshes, faces concatenated): to camera space, edge
+ *                      normals, screen bounds (tri_geo, tri_box); counts it in every TS x TS
+ *                      tile its edges do not exclude (tile_overlaps).
+ *   ndrf_raster_scan   the counts to each tile's first slot in the triangle list.
+ *   ndrf_raster_bin    per triangle: its index into the list of every tile it overlaps.
+ *   ndrf_raster_tile   per tile (TROWS of its rows a work-item): every listed triangle tested
+ *                      against the tile's pixels, TS columns at once as one vector; per
+ *                      pixel and mesh the nearest triangle kept in private memory, written
+ *                      once to tri. No atomics on the depth: a tile owns its pixels.
+ *   ndrf_resolve       per pixel and mesh: Embree (u, v) and depth along the unit ray,
+ *                      recomputed from the pixel ray and the world-space triangle.
  *
  * Coverage is exact ray-triangle coverage in camera space (homogeneous rasterisation,
  * Olano & Greer 1997): with camera-space vertices v0, v1, v2 and the pixel ray
@@ -15,50 +19,43 @@
  * the sign of V = det(v0, v1, v2) exactly when the ray's line crosses the triangle in
  * front of the camera, at t = V / (n . r) > 0 with n = (v1 - v0) x (v2 - v0) (the sum of
  * the three edge normals; V = n . v0). Each is computed without the cancellation of long
- * vectors (edge_normal), so a small triangle far away keeps its edges and depth. No near plane is needed: a
- * triangle crossing the camera plane is neither dropped nor clipped, its pixels are those
- * Embree (tnear = 0) hits. A zero-area or edge-on triangle (V = 0) covers nothing.
+ * vectors (edge_normal), so a small triangle far away keeps its edges and depth. No near
+ * plane is needed: a triangle crossing the camera plane is neither dropped nor clipped, its
+ * pixels are those Embree (tnear = 0) hits. A zero-area or edge-on triangle (V = 0) covers
+ * nothing.
  * Tie rule: a pixel centre on an edge (E = 0) is covered only where the edge's normal
  * c = sign(V) (v_i x v_j) is lexicographically positive. Two triangles sharing an edge,
  * facing the same way, compute exactly opposite c (a cross product with swapped operands
- * negates exactly without contraction), so such a pixel is covered exactly once.
+ * negates exactly without contraction) and evaluate E in one fixed order, so such a pixel
+ * is covered exactly once.
+ * Depth test: per pixel and mesh the least camera-space depth V / (n . r), the smaller
+ * triangle id on a tie (whatever order the tile's list holds its triangles in).
  *
- * Depth test: per pixel and mesh a 64-bit key (depth bits << 32 | triangle), kept by
- * atom_min (cl_khr_int64_extended_atomics): the nearest triangle, the smaller id on a tie.
- * depth is the camera-space z distance V / (n . r) (positive floats order as their bits).
- * Without 64-bit atomics (ATOMICS64=0) two passes over the same triangles: pass 0 keeps
- * the least depth bits per pixel (atomic_min on uint), pass 1 the least id among the
- * triangles whose depth bits equal it; the same result.
- *
- * Buffers: keys (K, H, W) ulong (ATOMICS64) or depth_bits + ids (K, H, W) uint; pairs
- * (capacity, 2) int (global triangle, tile) with the int counter n_pairs (may exceed the
- * capacity: the host grows it and reruns); out tri (K, H, W) int (-1: miss), bary (K, H, W)
- * float2, depth (K, H, W) float (inf on a miss).
- * -D defines (clrender/ndrf/raster_cl.py): K, TILE (pixels a tile side), ATOMICS64.
+ * Buffers: tri_geo (faces, 16) float: c (9), n (3), V, 3 unused; tri_box (faces, 8) int:
+ * x0, y0, x1, y1 inclusive pixel bounds (x0 > x1: covers nothing), mesh, face within it,
+ * tie-ownership bits of the 3 edges, 0; tile_count (n_tiles) int, then each tile's cursor (its
+ * first slot, advanced by ndrf_raster_bin); tile_start (n_tiles + 1) int; list (capacity)
+ * int; out tri (K, H, W) int (-1: miss), bary (K, H, W) float2, depth (K, H, W) float (inf
+ * on a miss). ray_ab: the pixel rays' a
+ * (tiles_x * TS floats; NaN past the image's last column, so nothing covers them), then
+ * b (height floats) of kernels/camera.h, computed once a frame on the host with the same
+ * float32 operations (clrender/ndrf/raster_cl.py).
+ * -D defines (clrender/ndrf/raster_cl.py): K, TS (tile side: 16, the vector width),
+ * TROWS (rows of a tile a work-item covers, dividing TS: TS on CPUs, 1 on GPUs).
  */
 #include "camera.h"
 #pragma OPENCL FP_CONTRACT OFF
 
-#if !defined(K) || !defined(TILE) || !defined(ATOMICS64)
-#error "ndrf_raster.cl needs -D K TILE ATOMICS64"
+#if !defined(K) || !defined(TS) || !defined(TROWS)
+#error "ndrf_raster.cl needs -D K TS TROWS"
 #endif
-#if ATOMICS64
-#pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
-#pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
-#define NO_HIT 0xffffffffffffffffUL
+#if TS != 16 || TS % TROWS != 0
+#error "TS must be 16 (one float16 a tile row) and a multiple of TROWS"
 #endif
-
-/* The visibility target of one frame: either the 64-bit keys or the two 32-bit planes. */
-typedef struct {
-#if ATOMICS64
-    volatile __global ulong *keys;
-#else
-    volatile __global uint *depth_bits;
-    volatile __global uint *ids;
-    int pass;
-#endif
-    int width, height;
-} Target;
+#define GROUPS (TS / TROWS)
+#define NONE 0x7fffffff
+/* Where ray_ab's b values start: after the a of every column of whole tiles. */
+#define RAY_B(width) (((width) + TS - 1) / TS * TS)
 
 /* A triangle in camera space, ready to test pixels. */
 typedef struct {
@@ -87,12 +84,13 @@ inline void cross_scaled(const float *a, const float *b, float s, float *out)
     out[2] = s * (a[0] * b[1] - a[1] * b[0]);
 }
 
-/* The pixel column (or row) range [lo, hi] whose centres +0.5 can fall in [a, b]; one pixel
- * of slack either side (the edge functions decide). */
+/* The pixel column (or row) range [lo, hi] whose centres +0.5 fall in [a, b], widened by
+ * 0.05 pixels (a projected vertex is placed within ~1e-3 pixels: a few float32 roundings of
+ * coordinates below 2^14; the edge functions decide). */
 inline int2 pixel_range(float a, float b, int n)
 {
-    const float lo = fmax(floor(a - 0.5f) - 1.0f, 0.0f);
-    const float hi = fmin(ceil(b - 0.5f) + 1.0f, (float)(n - 1));
+    const float lo = fmax(ceil(a - 0.5f - 0.05f), 0.0f);
+    const float hi = fmin(floor(b - 0.5f + 0.05f), (float)(n - 1));
     return (int2)((int)lo, (int)hi);
 }
 
@@ -166,144 +164,105 @@ inline int edge_owns_ties(const float *c)
     return c[0] > 0.0f || (c[0] == 0.0f && (c[1] > 0.0f || (c[1] == 0.0f && c[2] > 0.0f)));
 }
 
-inline void write_hit(const Target *tg, int k, int p, float depth, int id)
+/* Whether some pixel centre of the tile of columns [px0, px1], rows [py0, py1] may have all
+ * three edge functions of t >= 0. Each E = c0 a + c1 b - c2 is linear in the pixel ray's
+ * (a, b), so its largest value over the tile is at a corner; a tile is excluded only where
+ * that is below zero by more than its rounding (1e-5 of the terms' magnitude, ~80 ulp):
+ * never a pixel the exact test would cover. */
+inline int tile_overlaps(const float *c, __global const float *ray_ab, int width, int px0,
+                         int py0, int px1, int py1)
 {
-    const int idx = k * tg->width * tg->height + p;
-    const uint bits = as_uint(depth);
-#if ATOMICS64
-    atom_min(tg->keys + idx, ((ulong)bits << 32) | (ulong)(uint)id);
-#else
-    if (tg->pass == 0) atomic_min(tg->depth_bits + idx, bits);
-    else if (tg->depth_bits[idx] == bits) atomic_min(tg->ids + idx, (uint)id);
-#endif
-}
-
-/* The columns [*lo, *hi] of [x0, x1] where, on a row, all three edge functions of t may be
- * >= 0, one pixel of slack either side (*lo > *hi: none). On the row of ray b = ry the edge
- * function E = c0 a + rest, rest = c1 ry - c2, is linear in the pixel ray's
- * a = (px + 0.5 - cx) / fx and changes sign once, at a = -rest / c0 (inv_c0: the 1 / c0
- * of the three edges); the exact edge tests then run on this span only, not on the whole
- * box. Two triangles sharing an edge compute
- * exactly negated c and rest, hence the same crossing: their spans overlap by the slack. */
-inline void row_span(const Tri *t, const float *rest, const float *inv_c0, float fx, float cx,
-                     int x0, int x1, int *lo, int *hi)
-{
-    float a_lo = -INFINITY, a_hi = INFINITY;
+    const float a0 = ray_ab[px0], a1 = ray_ab[px1];
+    const float b0 = ray_ab[RAY_B(width) + py0], b1 = ray_ab[RAY_B(width) + py1];
     for (int e = 0; e < 3; ++e) {
-        const float c0 = t->c[3 * e];
-        if (c0 > 0.0f) a_lo = fmax(a_lo, -rest[e] * inv_c0[e]);
-        else if (c0 < 0.0f) a_hi = fmin(a_hi, -rest[e] * inv_c0[e]);
-        else if (rest[e] < 0.0f) a_hi = -INFINITY;
+        const float c0 = c[3 * e], c1 = c[3 * e + 1], c2 = c[3 * e + 2];
+        const float a = c0 > 0.0f ? fmax(a0, a1) : fmin(a0, a1);
+        const float b = c1 > 0.0f ? fmax(b0, b1) : fmin(b0, b1);
+        const float top = c0 * a + c1 * b - c2;
+        const float size = fabs(c0 * a) + fabs(c1 * b) + fabs(c2);
+        if (top < -1e-5f * size) return 0;
     }
-    /* a to pixel columns, clamped into [x0 - 1, x1 + 1] as floats first (a may be +-inf
-     * or NaN: a huge vertex), so the int conversion is defined. */
-    const float l = fmin(fmax(floor(a_lo * fx + cx - 0.5f) - 1.0f, (float)x0),
-                         (float)x1 + 1.0f);
-    const float h = fmax(fmin(ceil(a_hi * fx + cx - 0.5f) + 1.0f, (float)x1),
-                         (float)x0 - 1.0f);
-    *lo = (int)l;
-    *hi = a_lo <= a_hi ? (int)h : (int)l - 1;
+    return 1;
 }
 
-/* Cover the pixels of [x0, x1] x [y0, y1] (within the triangle's bounds) that t covers:
- * every edge function E = c0 rx + (c1 ry - c2) > 0, or = 0 on an edge that owns its ties
- * (a fixed evaluation order: a shared edge's E is exactly negated in its other triangle).
- * ray_ab: the pixel rays' a (width floats, then b: height floats) of kernels/camera.h,
- * (px + 0.5 - cx) / fx and -((py + 0.5 - cy) / fy), computed once a frame on the host
- * with the same float32 operations (clrender/ndrf/raster_cl.py); fx, cx: the camera's. */
-inline void cover(__global const float *ray_ab, float fx, float cx, const Tri *t,
-                  const Target *tg, int x0, int y0, int x1, int y1)
+/* The tiles [tx0, tx1] x [ty0, ty1] of triangle g's bounds (from tri_box). */
+inline int4 tile_range(__global const int *tri_box, int g)
 {
-    __global const float *ray_b = ray_ab + tg->width;
-    const float c00 = t->c[0], c10 = t->c[3], c20 = t->c[6], nx = t->n[0];
-    const int own0 = edge_owns_ties(t->c), own1 = edge_owns_ties(t->c + 3),
-              own2 = edge_owns_ties(t->c + 6);
-    const float inv_c0[3] = {1.0f / c00, 1.0f / c10, 1.0f / c20};
-    x0 = max(x0, t->x0);
-    x1 = min(x1, t->x1);
-    for (int py = max(y0, t->y0); py <= min(y1, t->y1); ++py) {
-        const float ry = ray_b[py];
-        float rest[3];
-        for (int e = 0; e < 3; ++e) rest[e] = t->c[3 * e + 1] * ry - t->c[3 * e + 2];
-        const float rest_n = t->n[1] * ry - t->n[2];
-        int lo, hi;
-        row_span(t, rest, inv_c0, fx, cx, x0, x1, &lo, &hi);
-        for (int px = lo; px <= hi; ++px) {
-            const float rx = ray_ab[px];
-            const float e0 = c00 * rx + rest[0], e1 = c10 * rx + rest[1],
-                        e2 = c20 * rx + rest[2], en = nx * rx + rest_n;
-            if ((e0 > 0.0f || (e0 == 0.0f && own0)) && (e1 > 0.0f || (e1 == 0.0f && own1)) &&
-                (e2 > 0.0f || (e2 == 0.0f && own2)) && en > 0.0f)
-                write_hit(tg, t->mesh, py * tg->width + px, t->V / en, t->id);
-        }
-    }
+    const int4 b = vload4(0, tri_box + 8 * g);
+    return (int4)(b.x / TS, b.y / TS, b.z / TS, b.w / TS);
 }
 
-#if ATOMICS64
-#define TARGET_ARGS volatile __global ulong *keys
-#define TARGET_INIT {keys, width, height}
-#else
-#define TARGET_ARGS volatile __global uint *depth_bits, volatile __global uint *ids, \
-                    const int pass
-#define TARGET_INIT {depth_bits, ids, pass, width, height}
-#endif
-
-__kernel void ndrf_raster_clear(const int n, TARGET_ARGS)
+__kernel void ndrf_raster_clear(const int n_tiles, __global int *tile_count)
 {
     const int i = (int)get_global_id(0);
-    if (i >= n) return;
-#if ATOMICS64
-    keys[i] = NO_HIT;
-#else
-    if (pass == 0) depth_bits[i] = 0xffffffffu;
-    ids[i] = 0xffffffffu;
-#endif
+    if (i < n_tiles) tile_count[i] = 0;
 }
 
-__kernel void ndrf_raster_tris(__global const float *cam, const int width, const int height,
-                               const int n_faces, __global const int *face_start,
-                               __global const int *faces, __global const float *vertices,
-                               __global const float *ray_ab, const int capacity,
-                               volatile __global int *n_pairs, __global int *pairs,
-                               TARGET_ARGS)
+__kernel void ndrf_raster_setup(__global const float *cam, const int width, const int height,
+                                const int n_faces, __global const int *face_start,
+                                __global const int *faces, __global const float *vertices,
+                                __global const float *ray_ab, __global float *tri_geo,
+                                __global int *tri_box, volatile __global int *tile_count)
 {
     const int g = (int)get_global_id(0);
     if (g >= n_faces) return;
     Tri t;
-    if (!tri_setup(g, cam, width, height, face_start, faces, vertices, &t)) return;
-    const Target tg = TARGET_INIT;
-    if ((t.x1 - t.x0 + 1) * (t.y1 - t.y0 + 1) <= TILE * TILE) {
-        cover(ray_ab, cam[0], cam[2], &t, &tg, t.x0, t.y0, t.x1, t.y1);
+    if (!tri_setup(g, cam, width, height, face_start, faces, vertices, &t)) {
+        vstore8((int8)(1, 1, 0, 0, 0, 0, 0, 0), 0, tri_box + 8 * g);    /* covers nothing */
         return;
     }
-    const int tx0 = t.x0 / TILE, tx1 = t.x1 / TILE, ty0 = t.y0 / TILE, ty1 = t.y1 / TILE;
-    const int tiles_x = (width + TILE - 1) / TILE;
-    const int n = (tx1 - tx0 + 1) * (ty1 - ty0 + 1);
-    const int first = atomic_add(n_pairs, n);
-    /* Quotient and remainder written out: LLVM pairs a / and % of the same operands with a
-     * freeze instruction, which Oclgrind 21.10's --uninitialized plugin cannot run. */
-    const int nx = tx1 - tx0 + 1;
-    for (int i = 0; i < n && first + i < capacity; ++i) {
-        const int row = i / nx;
-        vstore2((int2)(g, (ty0 + row) * tiles_x + tx0 + (i - row * nx)), first + i, pairs);
-    }
+    __global float *geo = tri_geo + 16 * g;
+    for (int j = 0; j < 9; ++j) geo[j] = t.c[j];
+    for (int j = 0; j < 3; ++j) geo[9 + j] = t.n[j];
+    geo[12] = t.V;
+    geo[13] = geo[14] = geo[15] = 0.0f;
+    const int own = edge_owns_ties(t.c) | edge_owns_ties(t.c + 3) << 1
+                    | edge_owns_ties(t.c + 6) << 2;
+    vstore8((int8)(t.x0, t.y0, t.x1, t.y1, t.mesh, t.id, own, 0), 0, tri_box + 8 * g);
+    const int tiles_x = (width + TS - 1) / TS;
+    for (int ty = t.y0 / TS; ty <= t.y1 / TS; ++ty)
+        for (int tx = t.x0 / TS; tx <= t.x1 / TS; ++tx)
+            if (tile_overlaps(t.c, ray_ab, width, max(tx * TS, t.x0), max(ty * TS, t.y0),
+                              min(tx * TS + TS - 1, t.x1), min(ty * TS + TS - 1, t.y1)))
+                atomic_inc(tile_count + ty * tiles_x + tx);
 }
 
-__kernel void ndrf_raster_tiles(__global const float *cam, const int width, const int height,
-                                __global const int *face_start, __global const int *faces,
-                                __global const float *vertices, __global const float *ray_ab,
-                                const int n_pairs, __global const int *pairs, TARGET_ARGS)
+/* One work-item: tile_start = the exclusive prefix sum of tile_count, tile_start[n_tiles]
+ * the total; tile_count becomes each tile's cursor (its first slot). */
+__kernel void ndrf_raster_scan(const int n_tiles, __global int *tile_count,
+                               __global int *tile_start)
 {
-    const int i = (int)get_global_id(0);
-    if (i >= n_pairs) return;
-    const int2 pair = vload2(i, pairs);
-    Tri t;
-    if (!tri_setup(pair.x, cam, width, height, face_start, faces, vertices, &t)) return;
-    const Target tg = TARGET_INIT;
-    const int tiles_x = (width + TILE - 1) / TILE;
-    const int row = pair.y / tiles_x;                   /* no %: see ndrf_raster_tris */
-    const int x0 = (pair.y - row * tiles_x) * TILE, y0 = row * TILE;
-    cover(ray_ab, cam[0], cam[2], &t, &tg, x0, y0, x0 + TILE - 1, y0 + TILE - 1);
+    if (get_global_id(0) != 0) return;
+    int s = 0;
+    for (int i = 0; i < n_tiles; ++i) {
+        const int c = tile_count[i];
+        tile_start[i] = s;
+        tile_count[i] = s;
+        s += c;
+    }
+    tile_start[n_tiles] = s;
+}
+
+__kernel void ndrf_raster_bin(const int width, const int n_faces, __global const float *ray_ab,
+                              __global const float *tri_geo, __global const int *tri_box,
+                              volatile __global int *cursor, const int capacity,
+                              __global int *list)
+{
+    const int g = (int)get_global_id(0);
+    if (g >= n_faces) return;
+    const int4 b = vload4(0, tri_box + 8 * g);
+    if (b.x > b.z) return;
+    float c[9];
+    for (int j = 0; j < 9; ++j) c[j] = tri_geo[16 * g + j];
+    const int tiles_x = (width + TS - 1) / TS;
+    const int4 r = tile_range(tri_box, g);
+    for (int ty = r.y; ty <= r.w; ++ty)
+        for (int tx = r.x; tx <= r.z; ++tx)
+            if (tile_overlaps(c, ray_ab, width, max(tx * TS, b.x), max(ty * TS, b.y),
+                              min(tx * TS + TS - 1, b.z), min(ty * TS + TS - 1, b.w))) {
+                const int slot = atomic_inc(cursor + ty * tiles_x + tx);
+                if (slot < capacity) list[slot] = g;
+            }
 }
 
 inline float dot3(const float *a, const float *b)
@@ -311,19 +270,100 @@ inline float dot3(const float *a, const float *b)
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
 
-/* Embree's (u, v) and distance along the unit ray: Moller-Trumbore on the world-space
- * triangle, clamped into the triangle (a pixel the edge test covered may sit a rounding
- * error outside). The ray direction only where a mesh is hit. Scalar arrays for Oclgrind,
- * as in cover(). */
+/* Embree's (u, v) and the distance t along the unit ray d from o of face g: Moller-Trumbore
+ * on the world-space triangle, clamped into the triangle (a pixel the edge test covered may
+ * sit a rounding error outside). Scalar arrays for Oclgrind, as in tri_setup(). */
+inline void resolve_hit(__global const int *faces, __global const float *vertices, int g,
+                        const float *o, const float *d, float *u, float *v, float *t)
+{
+    float p0[3], e1[3], e2[3], tv[3], pv[3], qv[3];
+    for (int j = 0; j < 3; ++j) {
+        p0[j] = vertices[3 * faces[3 * g] + j];
+        e1[j] = vertices[3 * faces[3 * g + 1] + j] - p0[j];
+        e2[j] = vertices[3 * faces[3 * g + 2] + j] - p0[j];
+        tv[j] = o[j] - p0[j];
+    }
+    cross_scaled(d, e2, 1.0f, pv);
+    cross_scaled(tv, e1, 1.0f, qv);
+    const float inv_det = 1.0f / dot3(e1, pv);
+    *u = clamp(dot3(tv, pv) * inv_det, 0.0f, 1.0f);
+    *v = clamp(dot3(d, qv) * inv_det, 0.0f, 1.0f - *u);
+    *t = dot3(e2, qv) * inv_det;
+}
+
+/* Rows [y0, y0 + TROWS) of the tile at column x0: every triangle of its list against the TS
+ * pixels of each row at once (a float16 of pixel rays), E = c0 a + (c1 b - c2) in the fixed
+ * order of a shared edge's other triangle; the nearest (then smallest id) per pixel and mesh
+ * kept in best / best_id, written to tri (-1: miss). */
+__kernel void ndrf_raster_tile(const int width, const int height, __global const float *ray_ab,
+                               __global const float *tri_geo, __global const int *tri_box,
+                               __global const int *tile_start, __global const int *list,
+                               __global int *tri)
+{
+    const int tx = (int)get_global_id(0), gy = (int)get_global_id(1);
+    const int ty = gy / GROUPS;
+    const int x0 = tx * TS, y0 = ty * TS + (gy - ty * GROUPS) * TROWS;  /* no %: Oclgrind */
+    if (x0 >= width || y0 >= height) return;
+    const int tile = ty * ((width + TS - 1) / TS) + tx;
+    const float16 rx = vload16(0, ray_ab + x0);
+    __global const float *ray_b = ray_ab + RAY_B(width);
+    float16 best[K][TROWS];
+    int16 best_id[K][TROWS];
+    for (int k = 0; k < K; ++k)
+        for (int r = 0; r < TROWS; ++r) {
+            best[k][r] = (float16)(INFINITY);
+            best_id[k][r] = (int16)(NONE);
+        }
+    const int end = tile_start[tile + 1];
+    for (int i = tile_start[tile]; i < end; ++i) {
+        const int g = list[i];
+        const int8 box = vload8(0, tri_box + 8 * g);
+        const int r0 = max(box.s1 - y0, 0), r1 = min(box.s3 - y0, TROWS - 1);
+        if (r0 > r1) continue;
+        __global const float *geo = tri_geo + 16 * g;
+        const float c00 = geo[0], c01 = geo[1], c02 = geo[2], c10 = geo[3], c11 = geo[4],
+                    c12 = geo[5], c20 = geo[6], c21 = geo[7], c22 = geo[8], n0 = geo[9],
+                    n1 = geo[10], n2 = geo[11], V = geo[12];
+        const int16 own0 = (int16)(-(box.s6 & 1)), own1 = (int16)(-((box.s6 >> 1) & 1)),
+                    own2 = (int16)(-((box.s6 >> 2) & 1)), id = (int16)(box.s5);
+        const int k = box.s4;
+        for (int r = r0; r <= r1; ++r) {
+            const float ry = ray_b[y0 + r];
+            const float16 e0 = c00 * rx + (c01 * ry - c02), e1 = c10 * rx + (c11 * ry - c12),
+                          e2 = c20 * rx + (c21 * ry - c22), en = n0 * rx + (n1 * ry - n2);
+            const int16 cov = ((e0 > 0.0f) | ((e0 == 0.0f) & own0))
+                              & ((e1 > 0.0f) | ((e1 == 0.0f) & own1))
+                              & ((e2 > 0.0f) | ((e2 == 0.0f) & own2)) & (en > 0.0f);
+            if (!any(cov)) continue;
+            const float16 dist = V / en;
+            const float16 b = best[k][r];
+            const int16 better = cov & ((dist < b) | ((dist == b) & (id < best_id[k][r])));
+            best[k][r] = select(b, dist, better);
+            best_id[k][r] = select(best_id[k][r], id, better);
+        }
+    }
+    const int n = width * height;
+    for (int k = 0; k < K; ++k)
+        for (int r = 0; r < TROWS && y0 + r < height; ++r) {
+            const int16 out = select(best_id[k][r], (int16)(-1), best_id[k][r] == NONE);
+            __global int *row = tri + k * n + (y0 + r) * width + x0;
+            if (x0 + TS <= width) {
+                vstore16(out, 0, row);
+            } else {
+                int lane[TS];
+                vstore16(out, 0, lane);
+                for (int x = 0; x < width - x0; ++x) row[x] = lane[x];
+            }
+        }
+}
+
+/* Per pixel: each mesh's hit (tri, from ndrf_raster_tile) resolved into Embree's (u, v) and
+ * the distance along the unit ray (resolve_hit); (0, 0) and inf on a miss. The ray
+ * direction only where a mesh is hit. */
 __kernel void ndrf_resolve(__global const float *cam, const int width, const int height,
-                           __global const int *face_start, __global const int *faces,
-                           __global const float *vertices, __global const float *ray_ab,
-#if ATOMICS64
-                           __global const ulong *keys,
-#else
-                           __global const uint *ids,
-#endif
-                           __global int *tri, __global float *bary, __global float *depth)
+                           __global const float *ray_ab, __global const int *face_start,
+                           __global const int *faces, __global const float *vertices,
+                           __global const int *tri, __global float *bary, __global float *depth)
 {
     const int px = (int)get_global_id(0), py = (int)get_global_id(1);
     if (px >= width || py >= height) return;
@@ -333,39 +373,20 @@ __kernel void ndrf_resolve(__global const float *cam, const int width, const int
     vstore3(camera_ray_origin(cam), 0, o);
     for (int k = 0; k < K; ++k) {
         const int idx = k * n + py * width + px;
-#if ATOMICS64
-        const ulong key = keys[idx];
-        const int id = key == NO_HIT ? -1 : (int)(uint)(key & 0xffffffffUL);
-#else
-        const int id = ids[idx] == 0xffffffffu ? -1 : (int)ids[idx];
-#endif
+        const int id = tri[idx];
         float u = 0.0f, v = 0.0f, t = INFINITY;
         if (id >= 0) {
             if (!have_dir) {
                 /* camera_ray_dir_into's operations on its a, b from ray_ab: the same bits. */
-                const float a = ray_ab[px], b = ray_ab[width + py];
+                const float a = ray_ab[px], b = ray_ab[RAY_B(width) + py];
                 for (int j = 0; j < 3; ++j)
                     d[j] = cam[4 + 3 * j] * a + cam[5 + 3 * j] * b - cam[6 + 3 * j];
                 const float norm = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
                 for (int j = 0; j < 3; ++j) d[j] = d[j] / norm;
                 have_dir = 1;
             }
-            const int g = face_start[k] + id;
-            float p0[3], e1[3], e2[3], tv[3], pv[3], qv[3];
-            for (int j = 0; j < 3; ++j) {
-                p0[j] = vertices[3 * faces[3 * g] + j];
-                e1[j] = vertices[3 * faces[3 * g + 1] + j] - p0[j];
-                e2[j] = vertices[3 * faces[3 * g + 2] + j] - p0[j];
-                tv[j] = o[j] - p0[j];
-            }
-            cross_scaled(d, e2, 1.0f, pv);
-            cross_scaled(tv, e1, 1.0f, qv);
-            const float inv_det = 1.0f / dot3(e1, pv);
-            u = clamp(dot3(tv, pv) * inv_det, 0.0f, 1.0f);
-            v = clamp(dot3(d, qv) * inv_det, 0.0f, 1.0f - u);
-            t = dot3(e2, qv) * inv_det;
+            resolve_hit(faces, vertices, face_start[k] + id, o, d, &u, &v, &t);
         }
-        tri[idx] = id;
         bary[2 * idx] = u;
         bary[2 * idx + 1] = v;
         depth[idx] = t;

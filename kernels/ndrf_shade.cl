@@ -18,9 +18,13 @@
  *
  * Hits: tri (K, H, W) int (-1: miss) and bary (K, H, W, 2) float Embree (u, v), from the
  * rasteriser (kernels/ndrf_raster.cl) or uploaded Embree hits.
- * hidden (height + PAD rows, width + PAD columns, H_STRIDE): pixel (x, y) at (y + PAD,
- * x + PAD); its padding is zeroed once per image size (ndrf_zero_padding) and never
- * written; of the rest conv1 reads only what conv0 wrote in the same frame.
+ * The frame is shaded in bands of rows [y_band, y_end) (one band where the hidden layer
+ * fits the device's largest buffer: clrender/ndrf/shader_cl.py). hidden holds a band's
+ * hidden rows y_band - PAD .. y_end - 1 (rows + PAD buffer rows, width + PAD columns,
+ * H_STRIDE): pixel (x, y) at (y - y_band + PAD, x + PAD). Its first PAD columns are zeroed
+ * once per size (ndrf_zero_padding) and never written, its first PAD rows zeroed for the
+ * first band (y < 0: the image's padding) and written by conv0 for the others; of the rest
+ * conv1 reads only what conv0 wrote for the same band.
  *
  * -D defines (clrender/ndrf/shader_cl.py:kernel_defines): from NDRFConfig K, FEATURES,
  * C_IN, HIDDEN, N_FREQ, KSIZE; for the device H_VEC (8 or 16: floats per hidden-channel
@@ -90,12 +94,14 @@ typedef struct {
     __global const float *features;    /* (sum V_k, FEATURES) */
 } Frame;
 
-/* The hidden layer's padding (its first PAD rows and columns) = 0. (clEnqueueFillBuffer
- * would do, but Oclgrind 21.10's --uninitialized plugin does not count it as a write.) */
-__kernel void ndrf_zero_padding(const int width, const int height, __global float *hidden)
+/* The hidden band's first PAD columns = 0, and its first PAD rows where top_rows.
+ * (clEnqueueFillBuffer would do, but Oclgrind 21.10's --uninitialized plugin does not count
+ * it as a write.) */
+__kernel void ndrf_zero_padding(const int width, const int rows, const int top_rows,
+                                __global float *hidden)
 {
     const int x = (int)get_global_id(0), y = (int)get_global_id(1);
-    if (x >= width + PAD || y >= height + PAD || (x >= PAD && y >= PAD)) return;
+    if (x >= width + PAD || y >= rows + PAD || (x >= PAD && (y >= PAD || !top_rows))) return;
     __global float *h = hidden + ((size_t)y * (width + PAD) + x) * H_STRIDE;
     for (int c = 0; c < H_STRIDE; ++c) h[c] = 0.0f;
 }
@@ -287,12 +293,15 @@ inline void ndrf_tap(hvec *acc, int t, const int *vi, const float *vw, const flo
  * exact build, the encoding times its weights; fast build, a sum over the three direction
  * components of a tabulated 1D function each, linearly interpolated (view_weights). */
 __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const float *w_view,
-                         __global const float *b0, __global float *hidden)
+                         __global const float *b0, const int y_band, const int y_end,
+                         __global float *hidden)
 {
-    const int x0 = (int)get_global_id(0) * SEG, y0 = (int)get_global_id(1) * ROWS;
-    if (x0 >= width || y0 >= height) return;
+    /* The band's hidden rows max(y_band - PAD, 0) .. y_end - 1. */
+    const int x0 = (int)get_global_id(0) * SEG;
+    const int y0 = max(y_band - PAD, 0) + (int)get_global_id(1) * ROWS;
+    if (x0 >= width || y0 >= y_end) return;
     const Frame f = FRAME_INIT;
-    const int nx = min(SEG, width - x0) + PAD, ny = min(ROWS, height - y0) + PAD;
+    const int nx = min(SEG, width - x0) + PAD, ny = min(ROWS, y_end - y0) + PAD;
     /* hidden (x, y) is read by the covered pixels among (x..x+PAD, y..y+PAD): conv0's own
      * input pixels. */
     if (!ndrf_any_covered(&f, x0, y0, nx, ny)) return;
@@ -321,8 +330,8 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
                         ndrf_tap(acc, dy * KSIZE + dx, vi[r + dy][q + dx], vw[r + dy][q + dx],
                                  view[r + dy][q + dx], node[r + dy][q + dx],
                                  frac[r + dy][q + dx], proj, w_view);
-            __global float *h = hidden + ((size_t)(y0 + r + PAD) * (width + PAD) + x0 + q
-                                         + PAD) * H_STRIDE;
+            __global float *h = hidden + ((size_t)(y0 + r - y_band + PAD) * (width + PAD)
+                                          + x0 + q + PAD) * H_STRIDE;
             #pragma unroll
             for (int j = 0; j < NB; ++j) vstore_h(ndrf_relu(acc[j]), j, h);
         }
@@ -349,12 +358,14 @@ inline float ndrf_sigmoid(float x)
     return 1.0f / (1.0f + NDRF_EXP(-x));
 }
 
+/* Rows y_band .. y_end - 1 of the image. */
 __kernel void ndrf_conv1(FRAME_ARGS, __global const float *hidden, __global const float *w1,
                          __global const float *b1, const float bg_r, const float bg_g,
-                         const float bg_b, __global float *rgb)
+                         const float bg_b, const int y_band, const int y_end,
+                         __global float *rgb)
 {
-    const int px = (int)get_global_id(0), py = (int)get_global_id(1);
-    if (px >= width || py >= height) return;
+    const int px = (int)get_global_id(0), py = y_band + (int)get_global_id(1);
+    if (px >= width || py >= y_end) return;
     const Frame f = FRAME_INIT;
     const int p = py * width + px;
     if (!ndrf_covered(&f, p)) {
@@ -367,7 +378,7 @@ __kernel void ndrf_conv1(FRAME_ARGS, __global const float *hidden, __global cons
     for (int dy = 0; dy < KSIZE; ++dy) {
         for (int dx = 0; dx < KSIZE; ++dx) {
             __global const float *h =
-                hidden + ((size_t)(py + dy) * (width + PAD) + px + dx) * H_STRIDE;
+                hidden + ((size_t)(py - y_band + dy) * (width + PAD) + px + dx) * H_STRIDE;
             __global const float *w = w1 + (dy * KSIZE + dx) * 3 * H_STRIDE;
             for (int j = 0; j < H_STRIDE / H_VEC; ++j) {
                 const hvec hv = vload_h(j, h);

@@ -16,7 +16,8 @@ Tolerances (stated, not tuned; tests/ndrf_hits_check.py says what "explained" me
   the surface);
 - rendered images: >= 50 dB PSNR between the raster and the Embree path (random and
   trained models); the shader's exact build within 1e-5 of the numpy reference on raster hits.
-Both depth tests run: 64-bit atomics and the two-pass 32-bit fallback (same results).
+Both work layouts run: a whole tile a work-item (CPUs) and a tile row a work-item (GPUs);
+they give the same hits bit for bit.
 """
 from __future__ import annotations
 
@@ -78,12 +79,12 @@ def _check_hits(meshes, camera, raster_hits, embree_hits, strict_agreement=True)
     return s
 
 
-@pytest.mark.parametrize("atomics64", [True, False])
+@pytest.mark.parametrize("rows", [16, 1])
 @pytest.mark.parametrize("K", [1, 2, 3, 4])
-def test_raster_matches_embree(K, atomics64):
+def test_raster_matches_embree(K, rows):
     model = _model(K)
     meshes = [model.mesh(k)[:2] for k in range(K)]
-    raster, caster = Rasteriser(model, atomics64=atomics64), HitCaster(model)
+    raster, caster = Rasteriser(model, rows=rows), HitCaster(model)
     for name, (fov, c2w) in _views(model).items():
         camera = Camera.from_fov(fov, 96, 72, c2w)
         s = _check_hits(meshes, camera, raster.hits(camera), caster.cast_camera(camera),
@@ -91,13 +92,20 @@ def test_raster_matches_embree(K, atomics64):
         assert s["covered"] > 0, name
 
 
-def test_depth_tests_agree_bit_for_bit():
-    model = _model(2)
-    camera = Camera.from_fov(0.9, 61, 47, _views(model)["close-up"][1])
-    a = Rasteriser(model, atomics64=True).hits(camera)
-    b = Rasteriser(model, atomics64=False).hits(camera)
-    for x, y in ((a.tri, b.tri), (a.bary, b.bary), (a.depth, b.depth)):
-        np.testing.assert_array_equal(x, y)
+def test_layouts_agree_bit_for_bit():
+    model = _model(3)
+    for name in ("close-up", "inside"):
+        camera = Camera.from_fov(0.9, 61, 47, _views(model)[name][1])
+        a = Rasteriser(model, rows=16).hits(camera)
+        for rows in (1, 4):
+            b = Rasteriser(model, rows=rows).hits(camera)
+            for x, y in ((a.tri, b.tri), (a.bary, b.bary), (a.depth, b.depth)):
+                np.testing.assert_array_equal(x, y)
+
+
+def test_invalid_layout_is_refused():
+    with pytest.raises(ValueError, match="rows=3: must divide the tile side 16"):
+        Rasteriser(_model(1), rows=3)
 
 
 def test_shared_edges_cover_each_pixel_once():

@@ -169,6 +169,23 @@ def test_buffers_persist_per_size():
     assert shader._bufs["hidden"] is not hidden
 
 
+@pytest.mark.parametrize("kernel_size", [2, 1])
+def test_bands_equal_one_pass(monkeypatch, kernel_size):
+    # A hidden layer larger than the device's biggest buffer is shaded in bands of rows;
+    # bands of 1, 5 and 7 rows give the one-pass image bit for bit, frame after frame (the
+    # first band's zero rows are restored after the later bands overwrote them).
+    model = _model(2, kernel_size)
+    camera, hits, _ = _inputs(model, *VIEWS[1])
+    whole, _ = Shader(model, exact=True).shade(camera, hits.tri, hits.bary)
+    for rows in (1, 5, 7):
+        monkeypatch.setattr(Shader, "band_rows", lambda self, w, h, rows=rows: rows)
+        banded = Shader(model, exact=True)
+        for _ in range(2):
+            rgb, _ = banded.shade(camera, hits.tri, hits.bary)
+            np.testing.assert_array_equal(rgb, whole)
+        assert banded._band == rows
+
+
 def test_bad_hits_are_rejected():
     model, shader = _model(1, 2), _shader(1, 2)
     camera, hits, _ = _inputs(model, *VIEWS[0])

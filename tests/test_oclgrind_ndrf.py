@@ -1,11 +1,12 @@
 """NDRF's kernels under the Oclgrind simulator (the harness and what it checks:
-tests/test_oclgrind.py): the rasteriser (kernels/ndrf_raster.cl) with the 64-bit atomic and
-the two-pass 32-bit depth test, from an orbit (triangles binned into tiles too: a close
-camera) and from inside the meshes (triangles crossing the camera plane); the shader
+tests/test_oclgrind.py): the rasteriser (kernels/ndrf_raster.cl) in both layouts (a tile
+or a tile row a work-item), from an orbit, from close (triangles over several tiles) and
+from inside the meshes (triangles crossing the camera plane); the shader
 (kernels/ndrf_shade.cl) on a tiny random model (K=2, 10x8 pixels, hits on the image border
 and misses) with both kernel sizes, both conv0 organisations and both builds, two frames
-each, from rasterised hits; and the refusal of an image whose buffers exceed the
-simulator's 128 MiB allocation limit (a clear error, nothing enqueued).
+each, from rasterised hits, and once in bands of 3 rows; and the refusal of an image whose
+buffers exceed the simulator's 128 MiB allocation limit (a clear error, nothing
+enqueued).
 """
 from __future__ import annotations
 
@@ -29,11 +30,11 @@ model = random_ndrf_model(NDRFConfig(thresholds=(1e-4, 1e-2)), 0)
 views = {"border": Camera.from_fov(0.8, 10, 8, look_at([1.6, -1.2, 0.7], [-0.4, 0.4, 0.45])),
          "close": Camera.from_fov(1.2, 40, 36, look_at([0.9, -0.2, 0.1])),
          "inside": Camera.from_fov(1.4, 10, 8, look_at([0.1, 0.05, 0.0], [1.0, 0.3, 0.2]))}
-for atomics64 in (True, False):
+for rows in (16, 1):
     for name, camera in views.items():
-        keep.append(Rasteriser(model, atomics64=atomics64))
+        keep.append(Rasteriser(model, rows=rows))
         hits = keep[-1].hits(camera)
-        print("RASTER", atomics64, name, int((hits.tri >= 0).sum()), keep[-1].binned_pairs,
+        print("RASTER", rows, name, int((hits.tri >= 0).sum()), keep[-1].binned_pairs,
               flush=True)
 keep.append(Rasteriser(model))
 hits = keep[-1].hits(views["border"])
@@ -50,6 +51,11 @@ for layout in ({"H_VEC": 8, "SEG": 1, "ROWS": 1}, {"H_VEC": 16, "SEG": 8, "ROWS"
                 rgb, ms = keep[-1].shade(views["border"], hits.tri, hits.bary)
             print("SHADED", keep[-1].defines["SEG"], kernel_size, exact,
                   round(float(hits.coverage.mean()), 3), bool(hits.coverage[-1, -1]), flush=True)
+shader_cl.Shader.band_rows = lambda self, width, height: 3
+keep.append(shader_cl.Shader(model, exact=True))
+for frame in range(2):
+    rgb, ms = keep[-1].shade(views["border"], hits.tri, hits.bary)
+print("BANDED", keep[-1]._band, flush=True)
 keep.append(Renderer(model))
 out = keep[-1].render(views["border"], stats=True)
 print("RENDERED", round(float(out["coverage"].mean()), 3), flush=True)
@@ -68,14 +74,14 @@ def test_ndrf_kernels_clean_under_oclgrind():
     assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])
     raster = [line.split() for line in log.splitlines() if line.startswith("RASTER")]
     assert len(raster) == 6 and all(int(r[3]) > 0 for r in raster), raster
-    # Both depth tests cover the same pixels; the close view bins triangles into tiles.
-    assert {r[2]: r[3] for r in raster[:3]} == {r[2]: r[3] for r in raster[3:]}, raster
-    assert all(int(r[4]) > 0 for r in raster if r[2] == "close"), raster
+    # Both layouts cover the same pixels from the same (triangle, tile) lists.
+    assert {r[2]: r[3:] for r in raster[:3]} == {r[2]: r[3:] for r in raster[3:]}, raster
+    assert all(int(r[4]) > 0 for r in raster), raster
     shaded = [line.split() for line in log.splitlines() if line.startswith("SHADED")]
     assert len(shaded) == 8, log[-4000:]
     assert {r[1] for r in shaded} == {"1", "8"}, shaded
     assert all(0.0 < float(r[4]) < 1.0 and r[5] == "True" for r in shaded), shaded
-    assert "RENDERED" in log
+    assert "BANDED 3" in log and "RENDERED" in log
     refused = [line for line in log.splitlines() if line.startswith("REFUSED")]
     assert len(refused) == 1 and "4096x4096 pixels" in refused[0] and "MiB" in refused[0], \
         log[-2000:]

@@ -1,18 +1,19 @@
 """The OpenCL visibility-buffer rasteriser of NDRF's K meshes (``kernels/ndrf_raster.cl``).
 
-Per frame, on the device: clear, cover each triangle's pixels with a depth test (a 64-bit
-atomic min of depth | id per pixel and mesh, or a two-pass 32-bit fallback on devices
-without ``cl_khr_int64_extended_atomics``), then resolve each pixel's nearest triangle into
-the hits the shader reads: triangle id, Embree's barycentrics (u, v) and the depth along the
-unit ray, recomputed from the pixel ray. The hit buffers stay on the device for
+Per frame, on the device: set up every triangle in camera space and bin it into the
+TS x TS screen tiles its edges may cover (count, prefix sum, fill), then cover each tile's
+pixels with its triangles, a whole tile row as one vector, keeping the nearest triangle per
+pixel and mesh in private memory (a tile owns its pixels: no atomic depth test, so any
+OpenCL 1.1 device runs it), and resolve each pixel's nearest triangle into the hits the
+shader reads: triangle id, Embree's barycentrics (u, v) and the depth along the unit ray,
+recomputed from the pixel ray. The hit buffers stay on the device for
 :class:`clrender.ndrf.shader_cl.Shader`; :meth:`Rasteriser.hits` reads them back (tests,
 statistics). :class:`clrender.ndrf.hits.HitCaster` (Embree) is the reference.
 
-A triangle whose screen box holds at most TILE^2 pixels is covered by its own work-item, row
-by row over the span its edges allow; a larger one is binned into (triangle, tile) pairs and
-covered by a second pass, parallel over the pairs, so no work-item loops over more than
-TILE^2 pixels, however close the camera. (An area bound, not a side bound: the slivers of a
-decimated mesh have long thin boxes, and binning those cost more than covering them.)
+A work-item covers ``TROWS`` rows of a tile: the whole tile on CPUs (one float16 a row, the
+triangle list read once), one row on GPUs (TS work-items a tile). However close the camera,
+no work-item loops over more than TS^2 pixels a triangle, and a triangle enters only the
+tiles its edge functions do not exclude at the tile's corners (long slivers stay cheap).
 
 Examples:
     >>> raster = Rasteriser(model)
@@ -20,24 +21,27 @@ Examples:
     >>> hits = raster.hits(camera)               # Hits, as HitCaster.cast_camera
 
 References: NDRF (Wan et al., CVPR 2023) §3.4 (hardware rasterisation); M. Olano and
-T. Greer, "Triangle scan conversion using 2D homogeneous coordinates", 1997.
+T. Greer, "Triangle scan conversion using 2D homogeneous coordinates", 1997; S. Laine and
+T. Karras, "High-performance software rasterization on GPUs", 2011 (binning into tiles).
 """
 from __future__ import annotations
 
 import numpy as np
 import pyopencl as cl
 
-from ..device import check_allocation, event_ms, get_runtime, padded, work_group_size
+from ..device import (check_allocation, device_type_name, event_ms, get_runtime, padded,
+                      work_group_size)
 from .hits import Hits
 
 F32, I32 = np.float32, np.int32
-TILE = 32                   # pixels a side of a binning tile (TILE^2 pixels a work-item)
-INITIAL_PAIRS = 1 << 14     # (triangle, tile) pairs first allocated; grown on demand
+TS = 16                     # pixels a side of a tile: one float16 a tile row
+INITIAL_PAIRS = 1 << 16     # (triangle, tile) list slots first allocated; grown on demand
 
 
-def has_int64_atomics(device: cl.Device) -> bool:
-    """Whether ``device`` offers the 64-bit atomic min the one-pass depth test uses."""
-    return "cl_khr_int64_extended_atomics" in device.extensions.split()
+def rows_per_item(device: cl.Device) -> int:
+    """Tile rows a work-item covers on ``device``: a whole tile on CPUs (its triangle list
+    read once), one row on GPUs (parallelism from the work-items)."""
+    return 1 if device_type_name(device) == "GPU" else TS
 
 
 def packed_geometry(meshes) -> dict:
@@ -54,13 +58,16 @@ def packed_geometry(meshes) -> dict:
 
 
 def pixel_ray_ab(camera) -> np.ndarray:
-    """(W + H,) float32: a = (x + 0.5 - cx) / fx per column, then b = -((y + 0.5 - cy) / fy)
-    per row, the camera-space pixel ray (a, b, -1) with the float32 operations of
-    ``kernels/camera.h`` (and :func:`clrender.camera.generate_rays`), bit for bit."""
+    """(W' + H,) float32: a = (x + 0.5 - cx) / fx per column, NaN past the last one up to
+    W' = W rounded up to whole tiles (no edge test passes there), then
+    b = -((y + 0.5 - cy) / fy) per row: the camera-space pixel ray (a, b, -1) with the
+    float32 operations of ``kernels/camera.h`` (and :func:`clrender.camera.generate_rays`),
+    bit for bit."""
     p = camera.packed()
     x = np.arange(camera.width, dtype=F32) + F32(0.5)
     y = np.arange(camera.height, dtype=F32) + F32(0.5)
-    return np.concatenate([(x - p[2]) / p[0], -((y - p[3]) / p[1])]).astype(F32)
+    pad = np.full(-camera.width % TS, np.nan, F32)
+    return np.concatenate([(x - p[2]) / p[0], pad, -((y - p[3]) / p[1])]).astype(F32)
 
 
 class Rasteriser:
@@ -70,23 +77,23 @@ class Rasteriser:
         meshes: an :class:`clrender.ndrf.baked.NDRFModel` (validated by its loader) or
             ``[(vertices (V, 3), faces (F, 3)), ...]``; a mesh may have no face.
         device: OpenCL device spec or :class:`clrender.device.Runtime`.
-        atomics64: use the 64-bit atomic depth test; None: where the device has it.
+        rows: tile rows a work-item covers (a divisor of TS); None: :func:`rows_per_item`.
+            Every layout gives the same hits, bit for bit.
     """
 
-    def __init__(self, meshes, device=None, atomics64: bool | None = None):
+    KERNELS = ("ndrf_raster_clear", "ndrf_raster_setup", "ndrf_raster_scan", "ndrf_raster_bin",
+               "ndrf_raster_tile", "ndrf_resolve")
+
+    def __init__(self, meshes, device=None, rows: int | None = None):
         if hasattr(meshes, "mesh"):
             meshes = [meshes.mesh(k)[:2] for k in range(meshes.config.K)]
         self.runtime = rt = get_runtime(device)
         self.K = len(meshes)
-        self.atomics64 = has_int64_atomics(rt.device) if atomics64 is None else bool(atomics64)
-        if self.atomics64 and not has_int64_atomics(rt.device):
-            raise ValueError(f"{rt.name}: no cl_khr_int64_extended_atomics for the 64-bit "
-                             "depth test")
-        program = rt.program("ndrf_raster.cl",
-                             {"K": self.K, "TILE": TILE, "ATOMICS64": self.atomics64})
-        self._kernels = {n: program.kernel(n) for n in
-                         ("ndrf_raster_clear", "ndrf_raster_tris", "ndrf_raster_tiles",
-                          "ndrf_resolve")}
+        self.rows = rows_per_item(rt.device) if rows is None else int(rows)
+        if self.rows < 1 or TS % self.rows:
+            raise ValueError(f"rows={rows}: must divide the tile side {TS}")
+        program = rt.program("ndrf_raster.cl", {"K": self.K, "TS": TS, "TROWS": self.rows})
+        self._kernels = {n: program.kernel(n) for n in self.KERNELS}
         geometry = packed_geometry(meshes)
         self.n_faces = int(geometry["face_start"][-1])
         mf = cl.mem_flags
@@ -95,7 +102,10 @@ class Rasteriser:
                                      hostbuf=np.ascontiguousarray(a) if a.size
                                      else np.zeros(3, a.dtype))
                      for name, a in geometry.items()}
-        self._n_pairs = cl.Buffer(rt.context, mf.READ_WRITE, 4)
+        n = max(self.n_faces, 1)
+        check_allocation(rt.device, f"raster triangle setup ({self.n_faces} faces)", 64 * n)
+        self._setup = {"tri_geo": cl.Buffer(rt.context, mf.READ_WRITE, 64 * n),
+                       "tri_box": cl.Buffer(rt.context, mf.READ_WRITE, 32 * n)}
         self._capacity = 0
         self.binned_pairs = 0        # (triangle, tile) pairs the last frame binned
         self._size = None
@@ -104,8 +114,8 @@ class Rasteriser:
 
     @property
     def mode(self) -> str:
-        """Which depth test runs: "64-bit atomics" or "32-bit two-pass"."""
-        return "64-bit atomics" if self.atomics64 else "32-bit two-pass"
+        """The layout, e.g. "16x16 tiles, 16 rows a work-item"."""
+        return f"{TS}x{TS} tiles, {self.rows} row{'s' if self.rows > 1 else ''} a work-item"
 
     def _frame_buffers(self, width: int, height: int) -> dict:
         if self._size != (width, height):
@@ -113,27 +123,32 @@ class Rasteriser:
             if n >= 2 ** 31:
                 raise ValueError(f"{width}x{height} pixels x K={self.K} meshes: more hit slots "
                                  "than the rasteriser's int32 indices address")
+            n_tiles = -(-width // TS) * -(-height // TS)
             sizes = {"tri": 4 * n, "bary": 8 * n, "depth": 4 * n}
-            sizes.update({"keys": 8 * n} if self.atomics64 else
-                         {"depth_bits": 4 * n, "ids": 4 * n})
             ctx, mf = self.runtime.context, cl.mem_flags
             for name, nbytes in sizes.items():
                 check_allocation(self.runtime.device, f"raster buffer '{name}' for "
                                  f"{width}x{height} pixels, K={self.K}", nbytes)
             self._bufs = {"cam": cl.Buffer(ctx, mf.READ_ONLY, 16 * 4),
-                          "ray_ab": cl.Buffer(ctx, mf.READ_ONLY, 4 * (width + height))}
+                          "ray_ab": cl.Buffer(ctx, mf.READ_ONLY,
+                                              4 * (-(-width // TS) * TS + height)),
+                          "tile_count": cl.Buffer(ctx, mf.READ_WRITE, 4 * n_tiles),
+                          "tile_start": cl.Buffer(ctx, mf.READ_WRITE, 4 * (n_tiles + 1))}
             self._bufs.update({name: cl.Buffer(ctx, mf.READ_WRITE, max(nbytes, 4))
                                for name, nbytes in sizes.items()})
-            self._size = (width, height)
+            self._size, self._n_tiles = (width, height), n_tiles
         return self._bufs
 
-    def _pairs(self, capacity: int) -> cl.Buffer:
+    def _list(self, capacity: int) -> cl.Buffer:
+        """The tile list, grown to hold at least ``capacity`` entries."""
         if capacity > self._capacity:
-            check_allocation(self.runtime.device, f"raster tile pairs ({capacity})", 8 * capacity)
-            self._pairs_buf = cl.Buffer(self.runtime.context, cl.mem_flags.READ_WRITE,
-                                        8 * capacity)
+            capacity = max(capacity, 2 * self._capacity, INITIAL_PAIRS)
+            check_allocation(self.runtime.device, f"raster tile list ({capacity} entries)",
+                             4 * capacity)
+            self._list_buf = cl.Buffer(self.runtime.context, cl.mem_flags.READ_WRITE,
+                                       4 * capacity)
             self._capacity = capacity
-        return self._pairs_buf
+        return self._list_buf
 
     def _run(self, name: str, shape: tuple[int, ...], *args) -> cl.Event:
         key = (name, shape)
@@ -142,57 +157,44 @@ class Rasteriser:
         local = self._local[key]
         return self._kernels[name](self.runtime.queue, padded(shape, local), local, *args)
 
-    def _target(self, b: dict, pass_: int) -> tuple:
-        if self.atomics64:
-            return (b["keys"],)
-        return (b["depth_bits"], b["ids"], np.int32(pass_))
-
-    def _cover(self, camera, b: dict, pass_: int) -> list[cl.Event]:
-        """One covering pass (both kernels); grows the pair buffer and reruns if it overflowed."""
-        q, g, w, h = self.runtime.queue, self._geo, np.int32(camera.width), np.int32(camera.height)
-        count = np.zeros(1, I32)
-        capacity = max(self._capacity, INITIAL_PAIRS)
-        while True:
-            pairs = self._pairs(capacity)
-            cl.enqueue_copy(q, self._n_pairs, np.zeros(1, I32))
-            ev_tris = self._run("ndrf_raster_tris", (max(self.n_faces, 1),), b["cam"], w, h,
-                                np.int32(self.n_faces), g["face_start"], g["faces"],
-                                g["vertices"], b["ray_ab"], np.int32(self._capacity),
-                                self._n_pairs, pairs, *self._target(b, pass_))
-            cl.enqueue_copy(q, count, self._n_pairs)
-            if count[0] <= self._capacity:
-                break
-            capacity = int(count[0])
-        self.binned_pairs = int(count[0])
-        ev_tiles = self._run("ndrf_raster_tiles", (max(int(count[0]), 1),), b["cam"], w, h,
-                             g["face_start"], g["faces"], g["vertices"], b["ray_ab"],
-                             np.int32(count[0]), pairs, *self._target(b, pass_))
-        return [ev_tris, ev_tiles]
-
     def rasterise(self, camera) -> tuple[dict, dict]:
         """Hits of every pixel of ``camera`` on each mesh, left on the device.
 
         Returns:
             ``(buffers, ms)``: device buffers ``tri`` (K, H, W) int32 (-1 on a miss),
             ``bary`` (K, H, W, 2) float32 Embree (u, v), ``depth`` (K, H, W) float32 along
-            the unit ray (inf on a miss); ``ms`` {"ms_raster", "ms_resolve"} kernel times.
+            the unit ray (inf on a miss); ``ms`` {"ms_raster": the kernels' time}
+            (milliseconds).
         """
-        w, h = camera.width, camera.height
-        b, q = self._frame_buffers(w, h), self.runtime.queue
+        b, q = self._frame_buffers(camera.width, camera.height), self.runtime.queue
+        g, s = self._geo, self._setup
+        w, h = np.int32(camera.width), np.int32(camera.height)
         cl.enqueue_copy(q, b["cam"], camera.packed())
         cl.enqueue_copy(q, b["ray_ab"], pixel_ray_ab(camera))
-        n = self.K * w * h
-        events = [self._run("ndrf_raster_clear", (max(n, 1),), np.int32(n),
-                            *self._target(b, 0))]
-        for pass_ in (0,) if self.atomics64 else (0, 1):
-            events += self._cover(camera, b, pass_)
-        resolve = self._run("ndrf_resolve", (w, h), b["cam"], np.int32(w), np.int32(h),
-                            self._geo["face_start"], self._geo["faces"], self._geo["vertices"],
-                            b["ray_ab"],
-                            b["keys"] if self.atomics64 else b["ids"], b["tri"], b["bary"],
-                            b["depth"])
-        return b, {"ms_raster": sum(event_ms(e) for e in events),
-                   "ms_resolve": event_ms(resolve)}
+        n_tiles, faces = np.int32(self._n_tiles), (max(self.n_faces, 1),)
+        events = [
+            self._run("ndrf_raster_clear", (int(n_tiles),), n_tiles, b["tile_count"]),
+            self._run("ndrf_raster_setup", faces, b["cam"], w, h, np.int32(self.n_faces),
+                      g["face_start"], g["faces"], g["vertices"], b["ray_ab"], s["tri_geo"],
+                      s["tri_box"], b["tile_count"]),
+            self._kernels["ndrf_raster_scan"](q, (1,), (1,), n_tiles, b["tile_count"],
+                                              b["tile_start"])]
+        total = np.zeros(1, I32)
+        cl.enqueue_copy(q, total, b["tile_start"], src_offset=4 * int(n_tiles))
+        self.binned_pairs = int(total[0])
+        tile_list = self._list(max(self.binned_pairs, 1))
+        tiles_x, tiles_y = -(-int(w) // TS), -(-int(h) // TS)
+        events += [
+            self._run("ndrf_raster_bin", faces, w, np.int32(self.n_faces), b["ray_ab"],
+                      s["tri_geo"], s["tri_box"], b["tile_count"], np.int32(self._capacity),
+                      tile_list),
+            self._run("ndrf_raster_tile", (tiles_x, tiles_y * (TS // self.rows)), w, h,
+                      b["ray_ab"], s["tri_geo"], s["tri_box"], b["tile_start"], tile_list,
+                      b["tri"]),
+            self._run("ndrf_resolve", (int(w), int(h)), b["cam"], w, h, b["ray_ab"],
+                      g["face_start"], g["faces"], g["vertices"], b["tri"], b["bary"],
+                      b["depth"])]
+        return b, {"ms_raster": sum(event_ms(e) for e in events)}
 
     def read_hits(self, camera) -> Hits:
         """The last :meth:`rasterise` of ``camera`` read back: arrays (K, H, W[, 2])."""

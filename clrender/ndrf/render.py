@@ -62,7 +62,7 @@ class Renderer:
         """(tri buffer, bary buffer, ms_intersect, host Hits or None)."""
         if self.hits == "raster":
             bufs, ms = self.rasteriser.rasterise(camera)
-            return bufs["tri"], bufs["bary"], ms["ms_raster"] + ms["ms_resolve"], None
+            return bufs["tri"], bufs["bary"], ms["ms_raster"], None
         start = time.perf_counter()
         hits = self.caster.cast_camera(camera)
         tri, bary = self.shader.upload_hits(camera, hits.tri, hits.bary)

@@ -181,22 +181,36 @@ class Shader:
         self._size = None
         self._bufs: dict = {}
 
+    def band_rows(self, width: int, height: int) -> int:
+        """Image rows shaded a band: all of them where the hidden layer fits the device's
+        largest buffer, else as many as fit (at least one; kernels/ndrf_shade.cl)."""
+        pad, row_bytes = self.defines["KSIZE"] - 1, (width + self.defines["KSIZE"] - 1) \
+            * self.defines["H_STRIDE"] * 4
+        fits = self.runtime.device.max_mem_alloc_size // row_bytes - pad
+        return int(max(1, min(height, fits)))
+
     def _frame_buffers(self, width: int, height: int) -> dict:
-        """Per-size buffers, re-allocated only when the image size changes: the camera, the
-        hidden layer (its padding zeroed here, never written by the passes; layout in
-        kernels/ndrf_shade.cl), the image and, once hits are uploaded, their buffers."""
+        """Per-size buffers, re-allocated only when the image size changes: the camera, one
+        band of the hidden layer (its padding columns zeroed here, never written by the
+        passes; layout in kernels/ndrf_shade.cl), the image and, once hits are uploaded,
+        their buffers."""
         if self._size != (width, height):
             ctx, mf = self.runtime.context, cl.mem_flags
             d, n = self.defines, width * height
             r = d["KSIZE"] - 1
-            hidden_floats = (height + r) * (width + r) * d["H_STRIDE"]
+            self._band = self.band_rows(width, height)
+            hidden_floats = (self._band + r) * (width + r) * d["H_STRIDE"]
             self._bufs = {"cam": cl.Buffer(ctx, mf.READ_ONLY, 16 * 4)}
             self._bufs.update(self._allocate(width, height, {"hidden": hidden_floats * 4,
                                                              "rgb": n * 12}))
-            self._run("ndrf_zero_padding", width + r, height + r, np.int32(width),
-                      np.int32(height), self._bufs["hidden"])
+            self._zero_padding(width, top_rows=True)
             self._size = (width, height)
         return self._bufs
+
+    def _zero_padding(self, width: int, top_rows: bool) -> cl.Event:
+        r = self.defines["KSIZE"] - 1
+        return self._run("ndrf_zero_padding", width + r, self._band + r, np.int32(width),
+                         np.int32(self._band), np.int32(top_rows), self._bufs["hidden"])
 
     def _allocate(self, width: int, height: int, sizes: dict) -> dict:
         """``{name: device buffer}`` of ``sizes`` bytes, each checked against the device's
@@ -269,13 +283,21 @@ class Shader:
         bg = [F32(c) for c in np.asarray(bg, np.float64).reshape(3)]
         cl.enqueue_copy(q, b["cam"], camera.packed())
         frame = self._frame_args(camera, tri_buf, bary_buf)
-        ev_conv0 = self._run("ndrf_conv0", -(-w // self.defines["SEG"]), -(-h // self.defines["ROWS"]), *frame, m["proj"], m["w_view"],
-                             m["b0"], b["hidden"])
-        ev_conv1 = self._run("ndrf_conv1", w, h, *frame, b["hidden"], m["w1"], m["b1"], *bg,
-                             b["rgb"])
+        seg, rows, pad = self.defines["SEG"], self.defines["ROWS"], self.defines["KSIZE"] - 1
+        ms = {"ms_conv0": 0.0, "ms_conv1": 0.0}
+        for y in range(0, h, self._band):
+            end = min(y + self._band, h)
+            if y == 0 and self._band < h:   # the last frame's later bands wrote the top rows
+                ms["ms_conv0"] += event_ms(self._zero_padding(w, top_rows=True))
+            band = (np.int32(y), np.int32(end))
+            ms["ms_conv0"] += event_ms(self._run(
+                "ndrf_conv0", -(-w // seg), -(-(end - max(y - pad, 0)) // rows), *frame,
+                m["proj"], m["w_view"], m["b0"], *band, b["hidden"]))
+            ms["ms_conv1"] += event_ms(self._run("ndrf_conv1", w, end - y, *frame, b["hidden"],
+                                                 m["w1"], m["b1"], *bg, *band, b["rgb"]))
         rgb = np.empty((h, w, 3), F32)
         cl.enqueue_copy(q, rgb, b["rgb"])
-        return rgb, {"ms_conv0": event_ms(ev_conv0), "ms_conv1": event_ms(ev_conv1)}
+        return rgb, ms
 
     def shade(self, camera, hits_tri, hits_bary, background=None):
         """Shade one frame from host hits: ``hits_tri`` (K, H, W) int32 (-1 for a miss),
