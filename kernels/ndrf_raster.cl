@@ -8,10 +8,10 @@
  *   ndrf_raster_bin    per triangle: its index into the list of every tile it overlaps.
  *   ndrf_raster_tile   per tile (TROWS of its rows a work-item): every listed triangle tested
  *                      against the tile's pixels, TS columns at once as one vector; per
- *                      pixel and mesh the nearest triangle kept in private memory, written
- *                      once to tri. No atomics on the depth: a tile owns its pixels.
- *   ndrf_resolve       per pixel and mesh: Embree (u, v) and depth along the unit ray,
- *                      recomputed from the pixel ray and the world-space triangle.
+ *                      pixel and mesh the nearest triangle, its Embree (u, v) and its depth
+ *                      along the unit ray (from the same edge functions: no gather, no
+ *                      second pass) kept in private memory, then written once. No atomics
+ *                      on the depth: a tile owns its pixels.
  *
  * Coverage is exact ray-triangle coverage in camera space (homogeneous rasterisation,
  * Olano & Greer 1997): with camera-space vertices v0, v1, v2 and the pixel ray
@@ -265,40 +265,18 @@ __kernel void ndrf_raster_bin(const int width, const int n_faces, __global const
             }
 }
 
-inline float dot3(const float *a, const float *b)
-{
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
-/* Embree's (u, v) and the distance t along the unit ray d from o of face g: Moller-Trumbore
- * on the world-space triangle, clamped into the triangle (a pixel the edge test covered may
- * sit a rounding error outside). Scalar arrays for Oclgrind, as in tri_setup(). */
-inline void resolve_hit(__global const int *faces, __global const float *vertices, int g,
-                        const float *o, const float *d, float *u, float *v, float *t)
-{
-    float p0[3], e1[3], e2[3], tv[3], pv[3], qv[3];
-    for (int j = 0; j < 3; ++j) {
-        p0[j] = vertices[3 * faces[3 * g] + j];
-        e1[j] = vertices[3 * faces[3 * g + 1] + j] - p0[j];
-        e2[j] = vertices[3 * faces[3 * g + 2] + j] - p0[j];
-        tv[j] = o[j] - p0[j];
-    }
-    cross_scaled(d, e2, 1.0f, pv);
-    cross_scaled(tv, e1, 1.0f, qv);
-    const float inv_det = 1.0f / dot3(e1, pv);
-    *u = clamp(dot3(tv, pv) * inv_det, 0.0f, 1.0f);
-    *v = clamp(dot3(d, qv) * inv_det, 0.0f, 1.0f - *u);
-    *t = dot3(e2, qv) * inv_det;
-}
-
 /* Rows [y0, y0 + TROWS) of the tile at column x0: every triangle of its list against the TS
  * pixels of each row at once (a float16 of pixel rays), E = c0 a + (c1 b - c2) in the fixed
  * order of a shared edge's other triangle; the nearest (then smallest id) per pixel and mesh
- * kept in best / best_id, written to tri (-1: miss). */
+ * kept in best / best_id with its barycentrics, then written out as the hits. These come
+ * from the same edge functions: with E_0, E_1, E_2 those of the edges opposite v0, v1, v2
+ * and n . r = E_0 + E_1 + E_2, the ray meets the triangle at Embree's u = E_1 / (n . r),
+ * v = E_2 / (n . r) (ratios of the tetrahedra (eye, v_i, v_j)), at camera-space depth
+ * V / (n . r), i.e. at distance V / (n . r) |(a, b, -1)| along the unit ray. */
 __kernel void ndrf_raster_tile(const int width, const int height, __global const float *ray_ab,
                                __global const float *tri_geo, __global const int *tri_box,
                                __global const int *tile_start, __global const int *list,
-                               __global int *tri)
+                               __global int *tri, __global float *bary, __global float *depth)
 {
     const int tx = (int)get_global_id(0), gy = (int)get_global_id(1);
     const int ty = gy / GROUPS;
@@ -307,11 +285,12 @@ __kernel void ndrf_raster_tile(const int width, const int height, __global const
     const int tile = ty * ((width + TS - 1) / TS) + tx;
     const float16 rx = vload16(0, ray_ab + x0);
     __global const float *ray_b = ray_ab + RAY_B(width);
-    float16 best[K][TROWS];
+    float16 best[K][TROWS], best_u[K][TROWS], best_v[K][TROWS];
     int16 best_id[K][TROWS];
     for (int k = 0; k < K; ++k)
         for (int r = 0; r < TROWS; ++r) {
             best[k][r] = (float16)(INFINITY);
+            best_u[k][r] = best_v[k][r] = (float16)(0.0f);
             best_id[k][r] = (int16)(NONE);
         }
     const int end = tile_start[tile + 1];
@@ -335,60 +314,53 @@ __kernel void ndrf_raster_tile(const int width, const int height, __global const
                               & ((e1 > 0.0f) | ((e1 == 0.0f) & own1))
                               & ((e2 > 0.0f) | ((e2 == 0.0f) & own2)) & (en > 0.0f);
             if (!any(cov)) continue;
-            const float16 dist = V / en;
+            const float16 dist = V / en, inv_en = 1.0f / en;
             const float16 b = best[k][r];
             const int16 better = cov & ((dist < b) | ((dist == b) & (id < best_id[k][r])));
             best[k][r] = select(b, dist, better);
+            best_u[k][r] = select(best_u[k][r], e1 * inv_en, better);
+            best_v[k][r] = select(best_v[k][r], e2 * inv_en, better);
             best_id[k][r] = select(best_id[k][r], id, better);
         }
     }
-    const int n = width * height;
-    for (int k = 0; k < K; ++k)
-        for (int r = 0; r < TROWS && y0 + r < height; ++r) {
-            const int16 out = select(best_id[k][r], (int16)(-1), best_id[k][r] == NONE);
-            __global int *row = tri + k * n + (y0 + r) * width + x0;
-            if (x0 + TS <= width) {
-                vstore16(out, 0, row);
+    const int n = width * height, cols = min(TS, width - x0);
+    for (int r = 0; r < TROWS && y0 + r < height; ++r) {
+        const float ry = ray_b[y0 + r];
+        /* |(a, b, -1)|: camera-space depth to distance along the unit ray */
+        const float16 len = sqrt(rx * rx + (ry * ry + 1.0f));
+        for (int k = 0; k < K; ++k) {
+            const int16 hit = best_id[k][r] != NONE;
+            const int16 id = select((int16)(-1), best_id[k][r], hit);
+            /* Clamped into the triangle, as Embree's: a covered pixel may sit a rounding
+             * error outside. */
+            const float16 u = select((float16)(0.0f), clamp(best_u[k][r], 0.0f, 1.0f), hit);
+            const float16 v = select((float16)(0.0f), clamp(best_v[k][r], 0.0f, 1.0f - u), hit);
+            const float16 t = select((float16)(INFINITY), best[k][r] * len, hit);
+            const int p = k * n + (y0 + r) * width + x0;
+            if (cols == TS) {
+                vstore16(id, 0, tri + p);
+                vstore16(t, 0, depth + p);
+            }
+            if (cols == TS && !any(hit)) {
+                vstore16((float16)(0.0f), 0, bary + 2 * p);
+                vstore16((float16)(0.0f), 0, bary + 2 * p + TS);
             } else {
-                int lane[TS];
-                vstore16(out, 0, lane);
-                for (int x = 0; x < width - x0; ++x) row[x] = lane[x];
+                float uv[2][TS];
+                vstore16(u, 0, uv[0]);
+                vstore16(v, 0, uv[1]);
+                for (int x = 0; x < cols; ++x)
+                    vstore2((float2)(uv[0][x], uv[1][x]), p + x, bary);
+            }
+            if (cols < TS) {
+                int ids[TS];
+                float ts[TS];
+                vstore16(id, 0, ids);
+                vstore16(t, 0, ts);
+                for (int x = 0; x < cols; ++x) {
+                    tri[p + x] = ids[x];
+                    depth[p + x] = ts[x];
+                }
             }
         }
-}
-
-/* Per pixel: each mesh's hit (tri, from ndrf_raster_tile) resolved into Embree's (u, v) and
- * the distance along the unit ray (resolve_hit); (0, 0) and inf on a miss. The ray
- * direction only where a mesh is hit. */
-__kernel void ndrf_resolve(__global const float *cam, const int width, const int height,
-                           __global const float *ray_ab, __global const int *face_start,
-                           __global const int *faces, __global const float *vertices,
-                           __global const int *tri, __global float *bary, __global float *depth)
-{
-    const int px = (int)get_global_id(0), py = (int)get_global_id(1);
-    if (px >= width || py >= height) return;
-    const int n = width * height;
-    float o[3], d[3];
-    int have_dir = 0;
-    vstore3(camera_ray_origin(cam), 0, o);
-    for (int k = 0; k < K; ++k) {
-        const int idx = k * n + py * width + px;
-        const int id = tri[idx];
-        float u = 0.0f, v = 0.0f, t = INFINITY;
-        if (id >= 0) {
-            if (!have_dir) {
-                /* camera_ray_dir_into's operations on its a, b from ray_ab: the same bits. */
-                const float a = ray_ab[px], b = ray_ab[RAY_B(width) + py];
-                for (int j = 0; j < 3; ++j)
-                    d[j] = cam[4 + 3 * j] * a + cam[5 + 3 * j] * b - cam[6 + 3 * j];
-                const float norm = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-                for (int j = 0; j < 3; ++j) d[j] = d[j] / norm;
-                have_dir = 1;
-            }
-            resolve_hit(faces, vertices, face_start[k] + id, o, d, &u, &v, &t);
-        }
-        bary[2 * idx] = u;
-        bary[2 * idx + 1] = v;
-        depth[idx] = t;
     }
 }

@@ -82,7 +82,7 @@ class Rasteriser:
     """
 
     KERNELS = ("ndrf_raster_clear", "ndrf_raster_setup", "ndrf_raster_scan", "ndrf_raster_bin",
-               "ndrf_raster_tile", "ndrf_resolve")
+               "ndrf_raster_tile")
 
     def __init__(self, meshes, device=None, rows: int | None = None):
         if hasattr(meshes, "mesh"):
@@ -190,10 +190,7 @@ class Rasteriser:
                       tile_list),
             self._run("ndrf_raster_tile", (tiles_x, tiles_y * (TS // self.rows)), w, h,
                       b["ray_ab"], s["tri_geo"], s["tri_box"], b["tile_start"], tile_list,
-                      b["tri"]),
-            self._run("ndrf_resolve", (int(w), int(h)), b["cam"], w, h, b["ray_ab"],
-                      g["face_start"], g["faces"], g["vertices"], b["tri"], b["bary"],
-                      b["depth"])]
+                      b["tri"], b["bary"], b["depth"])]
         return b, {"ms_raster": sum(event_ms(e) for e in events)}
 
     def read_hits(self, camera) -> Hits:
