@@ -2,8 +2,9 @@
  * the Embree first hits of clrender/ndrf/hits.py, which the tests hold it to:
  *   ndrf_raster_clear  the tiles' triangle counts = 0.
  *   ndrf_raster_setup  per triangle (all K meshes, faces concatenated): to camera space, edge
- *                      normals, screen bounds (tri_geo, tri_box); counts it in every TS x TS
- *                      tile its edges do not exclude (tile_overlaps).
+ *                      normals, screen bounds (tri_geo, tri_box).
+ *   ndrf_raster_count  per triangle: counted in every TS x TS tile its edges do not exclude
+ *                      (tile_overlaps).
  *   ndrf_raster_scan   the counts to each tile's first slot in the triangle list.
  *   ndrf_raster_bin    per triangle: its index into the list of every tile it overlaps.
  *   ndrf_raster_tile   per tile (TROWS of its rows a work-item): every listed triangle tested
@@ -89,72 +90,75 @@ inline void cross_scaled(const float *a, const float *b, float s, float *out)
  * coordinates below 2^14; the edge functions decide). */
 inline int2 pixel_range(float a, float b, int n)
 {
-    const float lo = fmax(ceil(a - 0.5f - 0.05f), 0.0f);
-    const float hi = fmin(floor(b - 0.5f + 0.05f), (float)(n - 1));
+    const float lo = fmin(fmax(ceil(a - 0.5f - 0.05f), 0.0f), (float)n);
+    const float hi = fmax(fmin(floor(b - 0.5f + 0.05f), (float)(n - 1)), -1.0f);
     return (int2)((int)lo, (int)hi);
 }
 
-/* s (v_a x v_b) of camera-space vertices v[a], v[b] (global indices i[a], i[b]) into out,
- * computed as v_lo x (v_hi - v_lo) from the vertex of the smaller index: the same value in
- * exact arithmetic, but without the cancellation of two long vectors (a small triangle far
- * from the eye), and, since both triangles of a shared edge compute the same product, still
- * exactly negated between them. */
-inline void edge_normal(float v[3][3], const int *i, int a, int b, float s, float *out)
+/* s (v_a x v_b) of camera-space vertices va, vb (global indices ia, ib) into out, computed as
+ * v_lo x (v_hi - v_lo) from the vertex of the smaller index: the same value in exact
+ * arithmetic, but without the cancellation of two long vectors (a small triangle far from
+ * the eye), and, since both triangles of a shared edge compute the same product, still
+ * exactly negated between them. Selects, no branch: PoCL vectorises the setup across
+ * triangles. */
+inline void edge_normal(const float *va, const float *vb, int ia, int ib, float s, float *out)
 {
-    const int lo = i[a] < i[b] ? a : b, hi = lo == a ? b : a;
-    float d[3];
-    for (int j = 0; j < 3; ++j) d[j] = v[hi][j] - v[lo][j];
-    cross_scaled(v[lo], d, lo == a ? s : -s, out);
+    const int swap = !(ia < ib);
+    float lo[3], d[3];
+    for (int j = 0; j < 3; ++j) {
+        lo[j] = swap ? vb[j] : va[j];
+        d[j] = (swap ? va[j] : vb[j]) - lo[j];
+    }
+    cross_scaled(lo, d, swap ? -s : s, out);
 }
 
-/* Triangle g of the concatenated faces: its mesh, camera-space edge normals and bounds.
- * Returns 0 when it cannot cover a pixel (degenerate, behind the camera, off screen). */
+/* Triangle g of the concatenated faces: its mesh, camera-space edge normals and inclusive
+ * pixel bounds. Returns 0 when it cannot cover a pixel (degenerate, behind the camera, off
+ * screen, or between pixel centres); t is then written all the same (straight-line code
+ * PoCL vectorises across triangles), its values meaningless. */
 inline int tri_setup(int g, __global const float *cam, int width, int height,
                      __global const int *face_start, __global const int *faces,
                      __global const float *vertices, Tri *t)
 {
     int k = 0;
-    while (k + 1 < K && g >= face_start[k + 1]) ++k;
+    for (int j = 1; j < K; ++j) k += g >= face_start[j];
     t->mesh = k;
     t->id = g - face_start[k];
-    float v[3][3], e1[3], e2[3], n[3];
-    int vi[3];
+    const int i0 = faces[3 * g], i1 = faces[3 * g + 1], i2 = faces[3 * g + 2];
+    float v0[3], v1[3], v2[3], e1[3], e2[3], n[3];
+    to_camera(cam, vertices + 3 * i0, v0);
+    to_camera(cam, vertices + 3 * i1, v1);
+    to_camera(cam, vertices + 3 * i2, v2);
     for (int j = 0; j < 3; ++j) {
-        vi[j] = faces[3 * g + j];
-        to_camera(cam, vertices + 3 * vi[j], v[j]);
-    }
-    for (int j = 0; j < 3; ++j) {
-        e1[j] = v[1][j] - v[0][j];
-        e2[j] = v[2][j] - v[0][j];
+        e1[j] = v1[j] - v0[j];
+        e2[j] = v2[j] - v0[j];
     }
     cross_scaled(e1, e2, 1.0f, n);
-    const float V = n[0] * v[0][0] + n[1] * v[0][1] + n[2] * v[0][2];
-    if (!(V != 0.0f) || (v[0][2] >= 0.0f && v[1][2] >= 0.0f && v[2][2] >= 0.0f)) return 0;
+    const float V = n[0] * v0[0] + n[1] * v0[1] + n[2] * v0[2];
     const float s = V > 0.0f ? 1.0f : -1.0f;
-    edge_normal(v, vi, 1, 2, s, t->c);
-    edge_normal(v, vi, 2, 0, s, t->c + 3);
-    edge_normal(v, vi, 0, 1, s, t->c + 6);
+    edge_normal(v1, v2, i1, i2, s, t->c);
+    edge_normal(v2, v0, i2, i0, s, t->c + 3);
+    edge_normal(v0, v1, i0, i1, s, t->c + 6);
     for (int j = 0; j < 3; ++j) t->n[j] = s * n[j];
     t->V = s * V;
     /* Camera looks down -z: depth -z. A vertex at or behind the camera plane: the covered
      * rays may lie anywhere on screen, bound by the image. */
     const float eps = 1e-7f;
-    if (-v[0][2] <= eps || -v[1][2] <= eps || -v[2][2] <= eps) {
-        t->x0 = 0; t->y0 = 0; t->x1 = width - 1; t->y1 = height - 1;
-        return 1;
-    }
-    const float ax = v[0][0] / -v[0][2], bx = v[1][0] / -v[1][2], cx = v[2][0] / -v[2][2];
-    const float ay = v[0][1] / -v[0][2], by = v[1][1] / -v[1][2], cy = v[2][1] / -v[2][2];
+    const int near = -v0[2] <= eps || -v1[2] <= eps || -v2[2] <= eps;
+    const float ax = v0[0] / -v0[2], bx = v1[0] / -v1[2], cx = v2[0] / -v2[2];
+    const float ay = v0[1] / -v0[2], by = v1[1] / -v1[2], cy = v2[1] / -v2[2];
     /* pixel x + 0.5 = cx + fx a, y + 0.5 = cy - fy b (kernels/camera.h) */
     const float sx0 = cam[2] + cam[0] * fmin(ax, fmin(bx, cx));
     const float sx1 = cam[2] + cam[0] * fmax(ax, fmax(bx, cx));
     const float sy0 = cam[3] - cam[1] * fmax(ay, fmax(by, cy));
     const float sy1 = cam[3] - cam[1] * fmin(ay, fmin(by, cy));
-    if (sx1 < -1.0f || sy1 < -1.0f || sx0 > (float)width + 1.0f || sy0 > (float)height + 1.0f)
-        return 0;
     const int2 xr = pixel_range(sx0, sx1, width), yr = pixel_range(sy0, sy1, height);
-    t->x0 = xr.x; t->x1 = xr.y; t->y0 = yr.x; t->y1 = yr.y;
-    return t->x0 <= t->x1 && t->y0 <= t->y1;
+    t->x0 = near ? 0 : xr.x;
+    t->x1 = near ? width - 1 : xr.y;
+    t->y0 = near ? 0 : yr.x;
+    t->y1 = near ? height - 1 : yr.y;
+    const int facing = V != 0.0f && !(v0[2] >= 0.0f && v1[2] >= 0.0f && v2[2] >= 0.0f);
+    return facing && t->x0 <= t->x1 && t->y0 <= t->y1;
 }
 
 /* Whether a pixel centre exactly on edge c (3 floats, E = 0) counts as covered: c
@@ -185,13 +189,6 @@ inline int tile_overlaps(const float *c, __global const float *ray_ab, int width
     return 1;
 }
 
-/* The tiles [tx0, tx1] x [ty0, ty1] of triangle g's bounds (from tri_box). */
-inline int4 tile_range(__global const int *tri_box, int g)
-{
-    const int4 b = vload4(0, tri_box + 8 * g);
-    return (int4)(b.x / TS, b.y / TS, b.z / TS, b.w / TS);
-}
-
 __kernel void ndrf_raster_clear(const int n_tiles, __global int *tile_count)
 {
     const int i = (int)get_global_id(0);
@@ -201,16 +198,12 @@ __kernel void ndrf_raster_clear(const int n_tiles, __global int *tile_count)
 __kernel void ndrf_raster_setup(__global const float *cam, const int width, const int height,
                                 const int n_faces, __global const int *face_start,
                                 __global const int *faces, __global const float *vertices,
-                                __global const float *ray_ab, __global float *tri_geo,
-                                __global int *tri_box, volatile __global int *tile_count)
+                                __global float *tri_geo, __global int *tri_box)
 {
     const int g = (int)get_global_id(0);
     if (g >= n_faces) return;
     Tri t;
-    if (!tri_setup(g, cam, width, height, face_start, faces, vertices, &t)) {
-        vstore8((int8)(1, 1, 0, 0, 0, 0, 0, 0), 0, tri_box + 8 * g);    /* covers nothing */
-        return;
-    }
+    const int ok = tri_setup(g, cam, width, height, face_start, faces, vertices, &t);
     __global float *geo = tri_geo + 16 * g;
     for (int j = 0; j < 9; ++j) geo[j] = t.c[j];
     for (int j = 0; j < 3; ++j) geo[9 + j] = t.n[j];
@@ -218,13 +211,44 @@ __kernel void ndrf_raster_setup(__global const float *cam, const int width, cons
     geo[13] = geo[14] = geo[15] = 0.0f;
     const int own = edge_owns_ties(t.c) | edge_owns_ties(t.c + 3) << 1
                     | edge_owns_ties(t.c + 6) << 2;
-    vstore8((int8)(t.x0, t.y0, t.x1, t.y1, t.mesh, t.id, own, 0), 0, tri_box + 8 * g);
+    __global int *box = tri_box + 8 * g;
+    box[0] = ok ? t.x0 : 1;             /* x0 > x1: covers nothing */
+    box[1] = t.y0;
+    box[2] = ok ? t.x1 : 0;
+    box[3] = t.y1;
+    box[4] = t.mesh;
+    box[5] = t.id;
+    box[6] = own;
+    box[7] = 0;
+}
+
+/* The tiles of triangle g that its edges do not exclude, counted (atomic) or each given
+ * the triangle's index in its list (at the tile's cursor). */
+inline void for_each_tile(int g, int width, __global const float *ray_ab,
+                          __global const float *tri_geo, __global const int *tri_box,
+                          volatile __global int *counter, const int capacity,
+                          __global int *list)
+{
+    const int4 b = vload4(0, tri_box + 8 * g);
+    if (b.x > b.z) return;
+    float c[9];
+    for (int j = 0; j < 9; ++j) c[j] = tri_geo[16 * g + j];
     const int tiles_x = (width + TS - 1) / TS;
-    for (int ty = t.y0 / TS; ty <= t.y1 / TS; ++ty)
-        for (int tx = t.x0 / TS; tx <= t.x1 / TS; ++tx)
-            if (tile_overlaps(t.c, ray_ab, width, max(tx * TS, t.x0), max(ty * TS, t.y0),
-                              min(tx * TS + TS - 1, t.x1), min(ty * TS + TS - 1, t.y1)))
-                atomic_inc(tile_count + ty * tiles_x + tx);
+    for (int ty = b.y / TS; ty <= b.w / TS; ++ty)
+        for (int tx = b.x / TS; tx <= b.z / TS; ++tx)
+            if (tile_overlaps(c, ray_ab, width, max(tx * TS, b.x), max(ty * TS, b.y),
+                              min(tx * TS + TS - 1, b.z), min(ty * TS + TS - 1, b.w))) {
+                const int slot = atomic_inc(counter + ty * tiles_x + tx);
+                if (list && slot < capacity) list[slot] = g;
+            }
+}
+
+__kernel void ndrf_raster_count(const int width, const int n_faces,
+                                __global const float *ray_ab, __global const float *tri_geo,
+                                __global const int *tri_box, volatile __global int *tile_count)
+{
+    const int g = (int)get_global_id(0);
+    if (g < n_faces) for_each_tile(g, width, ray_ab, tri_geo, tri_box, tile_count, 0, 0);
 }
 
 /* One work-item: tile_start = the exclusive prefix sum of tile_count, tile_start[n_tiles]
@@ -249,20 +273,7 @@ __kernel void ndrf_raster_bin(const int width, const int n_faces, __global const
                               __global int *list)
 {
     const int g = (int)get_global_id(0);
-    if (g >= n_faces) return;
-    const int4 b = vload4(0, tri_box + 8 * g);
-    if (b.x > b.z) return;
-    float c[9];
-    for (int j = 0; j < 9; ++j) c[j] = tri_geo[16 * g + j];
-    const int tiles_x = (width + TS - 1) / TS;
-    const int4 r = tile_range(tri_box, g);
-    for (int ty = r.y; ty <= r.w; ++ty)
-        for (int tx = r.x; tx <= r.z; ++tx)
-            if (tile_overlaps(c, ray_ab, width, max(tx * TS, b.x), max(ty * TS, b.y),
-                              min(tx * TS + TS - 1, b.z), min(ty * TS + TS - 1, b.w))) {
-                const int slot = atomic_inc(cursor + ty * tiles_x + tx);
-                if (slot < capacity) list[slot] = g;
-            }
+    if (g < n_faces) for_each_tile(g, width, ray_ab, tri_geo, tri_box, cursor, capacity, list);
 }
 
 /* Rows [y0, y0 + TROWS) of the tile at column x0: every triangle of its list against the TS
