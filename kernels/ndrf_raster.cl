@@ -118,12 +118,12 @@ inline void edge_normal(const float *va, const float *vb, int ia, int ib, float 
  * PoCL vectorises across triangles), its values meaningless. */
 inline int tri_setup(int g, __global const float *cam, int width, int height,
                      __global const int *face_start, __global const int *faces,
-                     __global const float *vertices, Tri *t)
+                     __global const int *face_ids, __global const float *vertices, Tri *t)
 {
     int k = 0;
     for (int j = 1; j < K; ++j) k += g >= face_start[j];
     t->mesh = k;
-    t->id = g - face_start[k];
+    t->id = face_ids[g];
     const int i0 = faces[3 * g], i1 = faces[3 * g + 1], i2 = faces[3 * g + 2];
     float v0[3], v1[3], v2[3], e1[3], e2[3], n[3];
     to_camera(cam, vertices + 3 * i0, v0);
@@ -197,13 +197,14 @@ __kernel void ndrf_raster_clear(const int n_tiles, __global int *tile_count)
 
 __kernel void ndrf_raster_setup(__global const float *cam, const int width, const int height,
                                 const int n_faces, __global const int *face_start,
-                                __global const int *faces, __global const float *vertices,
-                                __global float *tri_geo, __global int *tri_box)
+                                __global const int *faces, __global const int *face_ids,
+                                __global const float *vertices, __global float *tri_geo,
+                                __global int *tri_box)
 {
     const int g = (int)get_global_id(0);
     if (g >= n_faces) return;
     Tri t;
-    const int ok = tri_setup(g, cam, width, height, face_start, faces, vertices, &t);
+    const int ok = tri_setup(g, cam, width, height, face_start, faces, face_ids, vertices, &t);
     __global float *geo = tri_geo + 16 * g;
     for (int j = 0; j < 9; ++j) geo[j] = t.c[j];
     for (int j = 0; j < 3; ++j) geo[9 + j] = t.n[j];
