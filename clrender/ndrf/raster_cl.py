@@ -57,22 +57,37 @@ def packed_geometry(meshes) -> dict:
             "vertices": np.concatenate(vertices)}
 
 
-def morton_order(vertices, faces) -> np.ndarray:
-    """(F,) int32: the faces sorted along a Morton (Z-order) curve of their centroids, 10 bits
-    an axis over the mesh's bounds. The rasteriser stores its faces in this order, so the
-    triangles a screen tile lists lie close together in memory (their setup records are read
-    from cache, not one miss each); hits still report the faces' own indices."""
-    faces = np.asarray(faces, np.int64).reshape(-1, 3)
-    if not len(faces):
+def morton_order(points) -> np.ndarray:
+    """(N,) int32: ``points`` (N, 3) sorted along a Morton (Z-order) curve, 10 bits an axis
+    over their bounds. The rasteriser stores its faces in this order of their centroids (the
+    triangles a screen tile lists lie close together in memory: their setup records come
+    from cache; hits still report the faces' own indices), the shader its vertices (a
+    pixel's neighbours' vertex rows too)."""
+    c = np.nan_to_num(np.asarray(points, np.float64).reshape(-1, 3))
+    if not len(c):
         return np.zeros(0, I32)
-    c = np.nan_to_num(np.asarray(vertices, np.float64)[faces].mean(axis=1))
     lo, span = c.min(axis=0), np.ptp(c, axis=0)
     q = np.clip((c - lo) / np.where(span > 0, span, 1.0) * 1023, 0, 1023).astype(np.uint64)
-    code = np.zeros(len(faces), np.uint64)
+    code = np.zeros(len(c), np.uint64)
     for bit in range(10):
         for axis in range(3):
             code |= ((q[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
     return np.argsort(code, kind="stable").astype(I32)
+
+
+def spatially_ordered(vertices, faces) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """A mesh with its vertices and faces in Morton order (:func:`morton_order`; faces by
+    their centroids): ``((vertices, faces), face_ids)``, face_ids (F,) int32 the index each
+    face had."""
+    vertices = np.asarray(vertices, F32).reshape(-1, 3)
+    faces = np.asarray(faces, I32).reshape(-1, 3)
+    perm = morton_order(vertices)
+    inverse = np.empty_like(perm)
+    inverse[perm] = np.arange(len(perm), dtype=I32)
+    faces = inverse[faces] if len(faces) else faces
+    vertices = vertices[perm]
+    face_ids = morton_order(vertices[faces].mean(axis=1)) if len(faces) else np.zeros(0, I32)
+    return (vertices, faces[face_ids]), face_ids
 
 
 def pixel_ray_ab(camera) -> np.ndarray:
@@ -112,9 +127,8 @@ class Rasteriser:
             raise ValueError(f"rows={rows}: must divide the tile side {TS}")
         program = rt.program("ndrf_raster.cl", {"K": self.K, "TS": TS, "TROWS": self.rows})
         self._kernels = {n: program.kernel(n) for n in self.KERNELS}
-        orders = [morton_order(v, f) for v, f in meshes]
-        geometry = packed_geometry([(v, np.asarray(f, I32).reshape(-1, 3)[o])
-                                    for (v, f), o in zip(meshes, orders)])
+        meshes, orders = zip(*[spatially_ordered(v, f) for v, f in meshes])
+        geometry = packed_geometry(meshes)
         geometry["face_ids"] = np.concatenate(orders)
         self.n_faces = int(geometry["face_start"][-1])
         mf = cl.mem_flags

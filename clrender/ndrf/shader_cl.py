@@ -32,7 +32,7 @@ from ..device import (check_allocation, device_type_name, event_ms, get_runtime,
                       work_group_size)
 from .baked import validate
 from .config import FEATURES, NDRFConfig
-from .raster_cl import packed_geometry
+from .raster_cl import morton_order, packed_geometry
 
 F32, I32 = np.float32, np.int32
 KERNELS = ("ndrf_conv0", "ndrf_conv1", "ndrf_screen", "ndrf_zero_padding")
@@ -72,11 +72,23 @@ def kernel_defines(config: NDRFConfig, h_vec: int = 8, seg: int = 1, rows: int =
 
 
 def packed_meshes(model) -> dict:
-    """The K meshes concatenated for the gather: :func:`clrender.ndrf.raster_cl.packed_geometry`
-    (``face_start``, ``faces``, ``vertices``) and ``features`` (sum V_k, 8) float32."""
-    K = model.config.K
-    return {**packed_geometry([model.mesh(k)[:2] for k in range(K)]),
-            "features": np.concatenate([np.asarray(model.mesh(k)[2], F32) for k in range(K)])}
+    """The K meshes concatenated for the gather, each mesh's vertices in Morton order
+    (:func:`clrender.ndrf.raster_cl.morton_order`: neighbouring pixels' vertex rows lie
+    close in memory), faces in their own order: :func:`clrender.ndrf.raster_cl.packed_geometry`
+    (``face_start``, ``faces``, ``vertices``), ``features`` (sum V_k, 8) float32 and
+    ``vertex_order`` (sum V_k,) int32, the concatenated vertex each row holds."""
+    meshes, features, order, offset = [], [], [], 0
+    for k in range(model.config.K):
+        vertices, faces, feats = model.mesh(k)
+        perm = morton_order(vertices)
+        inverse = np.empty_like(perm)
+        inverse[perm] = np.arange(len(perm), dtype=I32)
+        meshes.append((np.asarray(vertices, F32)[perm], inverse[np.asarray(faces, I32)]))
+        features.append(np.asarray(feats, F32)[perm])
+        order.append(perm + offset)
+        offset += len(perm)
+    return {**packed_geometry(meshes), "features": np.concatenate(features),
+            "vertex_order": np.concatenate(order)}
 
 
 def vertex_projections(model, defines: dict) -> np.ndarray:
@@ -173,6 +185,7 @@ class Shader:
         self._local: dict = {}
         self._n_faces = [len(model.mesh(k)[1]) for k in range(self.config.K)]
         arrays = {**packed_meshes(model), **packed_weights(model, self.defines, self.exact)}
+        arrays["proj"] = arrays["proj"][arrays.pop("vertex_order")]
         mf = cl.mem_flags
         self._model_bufs = {name: cl.Buffer(rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR,
                                             hostbuf=np.ascontiguousarray(a))
