@@ -274,6 +274,4 @@ def device_info(device: cl.Device) -> dict:
         "max_alloc_MiB": device.max_mem_alloc_size >> 20,
         "local_mem_KiB": device.local_mem_size >> 10,
         "version": device.version.strip(),
-        # NDRF's rasteriser: a one-pass 64-bit atomic depth test, else its 32-bit two-pass one.
-        "int64_atomics": "cl_khr_int64_extended_atomics" in device.extensions.split(),
     }

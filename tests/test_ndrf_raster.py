@@ -31,7 +31,7 @@ from clrender.metrics import psnr
 from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.hits import HitCaster
 from clrender.ndrf.random_model import random_ndrf_model
-from clrender.ndrf.raster_cl import Rasteriser
+from clrender.ndrf.raster_cl import Rasteriser, morton_order
 from clrender.ndrf.render import Renderer
 from clrender.ndrf.shader_ref import shade_reference
 from ndrf_hits_check import compare
@@ -101,6 +101,19 @@ def test_layouts_agree_bit_for_bit():
             b = Rasteriser(model, rows=rows).hits(camera)
             for x, y in ((a.tri, b.tri), (a.bary, b.bary), (a.depth, b.depth)):
                 np.testing.assert_array_equal(x, y)
+
+
+def test_morton_order_is_a_local_permutation():
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-1.0, 1.0, (4096, 3))
+    order = morton_order(points)
+    assert np.array_equal(np.sort(order), np.arange(len(points)))
+    # Consecutive points along the curve are close: the mean step is a small fraction of
+    # the mean distance between random points (~1.4 here).
+    step = np.linalg.norm(np.diff(points[order], axis=0), axis=1).mean()
+    assert step < 0.25, step
+    assert morton_order(np.zeros((0, 3))).shape == (0,)
+    assert np.array_equal(np.sort(morton_order(np.ones((5, 3)))), np.arange(5))
 
 
 def test_invalid_layout_is_refused():
