@@ -5,7 +5,7 @@
 
 Random model: one orbit view per ``--sizes`` side. Trained model (``--model`` and ``--data``):
 the dataset's test cameras at the test size, 800x800 and 1920x1080 (``--frames``), each
-camera resized with :func:`bench.ngprt_kernels.at_size` (the vertical field of view and the
+camera resized with :func:`bench.sizes.at_size` (the vertical field of view and the
 pixel aspect kept: a square test camera at 1920x1080 sees a wider view, not a stretched
 one). Stages: ``intersect`` (the rasteriser's kernels, or Embree on the host plus the upload),
 ``conv0`` (with the gather of the screen pixels) and ``conv1``, kernel times from profiling
@@ -32,7 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from bench.limits import flop_rate, gather_rate
-from bench.ngprt_kernels import TRAINED_SIZES, _parse_size, at_size
+from bench.ngprt_kernels import TRAINED_SIZES
+from bench.sizes import at_size, parse_size
 from clrender import methods
 from clrender.atomic import write_atomic
 from clrender.data import load_dataset
@@ -219,7 +220,7 @@ def main(argv=None) -> int:
     cams = load_dataset(args.data, split="test").cameras
     frames = {f"{cams[0].width}x{cams[0].height}": cams}
     for text in args.frames:
-        w, h = _parse_size(text)
+        w, h = parse_size(text)
         frames[f"{w}x{h}"] = [at_size(c, w, h) for c in cams]
     run(model, frames, args.repeats, args.out, str(args.model),
         f"{len(cams)} test cameras of {args.data}", args.device, args.teacher)

@@ -21,7 +21,7 @@ pixel count; the table says so. Writes ``<out>/ngprt_kernels.{json,md}``.
 Trained model (``--model M.npz --data DIR``): its one variant, with G, on the first
 ``--views`` test cameras of DIR at the test size and at ``--sizes`` (default 800x800 and
 1920x1080; each test camera through ``Camera.scaled_to``, the pixel aspect kept:
-:func:`at_size`), the same columns per frame size. Writes
+:func:`bench.sizes.at_size`), the same columns per frame size. Writes
 ``<out>/ngprt_kernels_<model stem>.{json,md}``.
 
 ``--baseline DIR`` renders every row with the kernel sources of DIR too (e.g. a copy of an
@@ -34,12 +34,12 @@ import argparse
 import datetime
 import json
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from bench.limits import deferred_bound, march_bound, measure_limits
+from bench.sizes import at_size, parse_size
 from clrender.atomic import write_atomic
 from clrender.device import get_runtime
 from clrender.data import load_dataset
@@ -170,25 +170,30 @@ def bounds_note(meta: dict) -> str:
     return note
 
 
+def _section(title: str, intro: str, head: list[str], rows: list[list[str]]) -> str:
+    """A markdown section: the ``## title``, the ``intro`` paragraph and a table of
+    ``rows`` (lists of cells) under ``head``."""
+    lines = [f"## {title}", "", intro, "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(cells) + " |" for cells in rows]
+    return "\n".join(lines) + "\n"
+
+
 def markdown(rows: list[dict], meta: dict) -> str:
     head = ["variant", "G"] + STAGE_HEAD + ["vs mlp", "G on vs off", "CL vs ref"]
     head += BASELINE_HEAD if meta.get("baseline") else []
-    lines = ["## NGP-RT OpenCL kernels", "",
-             f"{meta['device']}; `{meta['preset']}` preset ({meta['config']}), {meta['scene']} "
+    intro = (f"{meta['device']}; `{meta['preset']}` preset ({meta['config']}), {meta['scene']} "
              f"random structured model, {meta['size']}x{meta['size']} orbit view, "
              f"{meta['build']} build, {meta['repeats']} repeats after a warm-up. "
              f"{bounds_note(meta)} The bounds use the separate-v model's tables (other "
              f"variants differ slightly). Speed-ups: time of the other / this row's time, "
              f">1 = this row is faster. The numpy reference was timed once per variant (with "
-             f"G) on a {meta['ref_size']}^2 frame and scaled by pixel count.", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for r in rows:
-        cells = [r["variant"], "on" if r["use_G"] else "off"] + _stage_cells(r)[:8] + [
-            f"{r['vs_mlp']:.2f}x" if "vs_mlp" in r else "",
-            f"{r['G_speedup']:.2f}x" if r["use_G"] else "",
-            f"{r['vs_ref']:.0f}x" if r.get("vs_ref") else ""] + _stage_cells(r)[8:]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+             f"G) on a {meta['ref_size']}^2 frame and scaled by pixel count.")
+    cells = [[r["variant"], "on" if r["use_G"] else "off"] + _stage_cells(r)[:8] + [
+        f"{r['vs_mlp']:.2f}x" if "vs_mlp" in r else "",
+        f"{r['G_speedup']:.2f}x" if r["use_G"] else "",
+        f"{r['vs_ref']:.0f}x" if r.get("vs_ref") else ""] + _stage_cells(r)[8:] for r in rows]
+    return _section("NGP-RT OpenCL kernels", intro, head, cells)
 
 
 def _print_row(label: str, m: dict) -> None:
@@ -246,46 +251,24 @@ def run(size: int, repeats: int, preset_name: str, scene: str, ref_size: int, ou
 TRAINED_SIZES = ("800x800", "1920x1080")
 
 
-def at_size(camera, width: int, height: int):
-    """A test camera at ``width`` x ``height``: :meth:`Camera.scaled_to` (intrinsics
-    scaled per axis), then ``fx`` reset to keep the test camera's pixel aspect ``fx / fy``:
-    the vertical field of view is kept and the horizontal one follows the new aspect (a
-    square test camera at 1920x1080 sees 16:9 of the scene, unstretched)."""
-    c = camera.scaled_to(width, height)
-    return replace(c, fx=c.fy * camera.fx / camera.fy)
-
-
-def _parse_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"frame size {text!r}: expected WIDTHxHEIGHT, e.g. 1920x1080") from None
-    if w <= 0 or h <= 0:
-        raise ValueError(f"frame size {text!r}: width and height must be positive")
-    return w, h
-
-
 def trained_markdown(rows: list[dict], meta: dict) -> str:
     head = ["frame", "variant", "G"] + STAGE_HEAD + (BASELINE_HEAD if meta.get("baseline") else [])
-    lines = ["## NGP-RT OpenCL kernels, trained model", "",
-             f"{meta['device']}; `{meta['model']}` ({meta['config']}) on the {meta['views']} "
+    intro = (f"{meta['device']}; `{meta['model']}` ({meta['config']}) on the {meta['views']} "
              f"test cameras of `{meta['data']}`, {meta['build']} build, {meta['repeats']} "
              f"repeats a camera after a warm-up; times over every camera and repeat, counters "
              f"and bounds per frame (means over the cameras). Frames other than the test "
              f"size: each test camera through `Camera.scaled_to`, then fx set so fx / fy "
              f"stays the test camera's (square pixels): the vertical field of view is kept, "
-             f"the horizontal one follows the frame's aspect. {bounds_note(meta)}", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for r in rows:
-        cells = [r["size"], r["variant"], "on" if r["use_G"] else "off"] + _stage_cells(r)
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+             f"the horizontal one follows the frame's aspect. {bounds_note(meta)}")
+    cells = [[r["size"], r["variant"], "on" if r["use_G"] else "off"] + _stage_cells(r)
+             for r in rows]
+    return _section("NGP-RT OpenCL kernels, trained model", intro, head, cells)
 
 
 def run_trained(model_path: Path, data: Path, sizes, repeats: int, out: Path, device=None,
                 exact: bool = False, views: int | None = None, baseline=None) -> list[dict]:
     """Times a trained model on its dataset's test cameras at the test size and at
-    ``sizes`` ("WxH", :func:`at_size`), with G; writes
+    ``sizes`` ("WxH", :func:`bench.sizes.at_size`), with G; writes
     ``<out>/ngprt_kernels_<model stem>.{md,json}``."""
     model = load_baked(model_path)
     ds = load_dataset(data, split="test")
@@ -296,7 +279,7 @@ def run_trained(model_path: Path, data: Path, sizes, repeats: int, out: Path, de
     test_size = f"{cameras[0].width}x{cameras[0].height}"
     rows = []
     for size in [test_size] + [x for x in sizes if x != test_size]:
-        w, h = _parse_size(size)
+        w, h = parse_size(size)
         cams = cameras if size == test_size else [at_size(c, w, h) for c in cameras]
         m = measure(model, cams, True, repeats, device, exact, limits, baseline, ds.background)
         c = cams[0]

@@ -11,7 +11,8 @@ import shutil
 import numpy as np
 import pytest
 
-from bench.ngprt_kernels import at_size, main, measure
+from bench.ngprt_kernels import main, measure
+from bench.sizes import at_size
 from clrender.camera import Camera, look_at
 from clrender.data import make_scene
 from clrender.device import _kernel_dir

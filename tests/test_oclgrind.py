@@ -98,12 +98,18 @@ def _oclgrind(script: str) -> tuple[subprocess.CompletedProcess, str, list[str]]
     return proc, log, [line for b in blocks for line in b.splitlines() if ERROR.search(line)]
 
 
+def assert_clean(proc: subprocess.CompletedProcess, log: str, errors: list[str]) -> None:
+    """The run under Oclgrind (:func:`_oclgrind`'s three results) exited 0 and Oclgrind
+    reported nothing."""
+    assert proc.returncode == 0, f"oclgrind run failed ({proc.returncode}):\n{log[-4000:]}"
+    assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])
+
+
 @pytest.mark.oclgrind
 def test_kernels_clean_under_oclgrind():
     require(shutil.which("oclgrind") is not None, "oclgrind (apt install oclgrind)")
     proc, log, errors = _oclgrind(SCRIPT)
-    assert proc.returncode == 0, f"oclgrind run failed ({proc.returncode}):\n{log[-4000:]}"
-    assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])
+    assert_clean(proc, log, errors)
     assert log.count("RENDERED") == 1 + 3 * (5 * 2 + 7), log[-4000:]
     builds = {}
     for line in log.splitlines():

@@ -15,7 +15,7 @@ import shutil
 import pytest
 
 from deps import require
-from test_oclgrind import _oclgrind
+from test_oclgrind import _oclgrind, assert_clean
 
 SCRIPT = """
 from clrender.camera import Camera, look_at
@@ -70,8 +70,7 @@ except ValueError as e:
 def test_ndrf_kernels_clean_under_oclgrind():
     require(shutil.which("oclgrind") is not None, "oclgrind (apt install oclgrind)")
     proc, log, errors = _oclgrind(SCRIPT)
-    assert proc.returncode == 0, f"oclgrind run failed ({proc.returncode}):\n{log[-4000:]}"
-    assert not errors, "Oclgrind reported:\n" + "\n".join(errors[:40])
+    assert_clean(proc, log, errors)
     raster = [line.split() for line in log.splitlines() if line.startswith("RASTER")]
     assert len(raster) == 6 and all(int(r[3]) > 0 for r in raster), raster
     # Both layouts cover the same pixels from the same (triangle, tile) lists.

@@ -158,10 +158,6 @@ class Renderer:
             ``kernels/`` (``bench.ngprt_kernels --baseline``: another version of them).
     """
 
-    SCALAR_STATS = {"Marching": "n_march", "Occupied": "n_occ"}
-    RENDER_OPTIONS = {"use_G": bool}
-    TIME_NOTE = "OpenCL kernel time per frame (ray marching + deferred MLP)"
-
     def __init__(self, model, device=None, use_G: bool = True, exact: bool = False,
                  rays: int | None = None, deferred_vec: int | None = None,
                  kernel_dir: str | None = None):
