@@ -34,13 +34,13 @@
  *
  * Buffers: tri_geo (faces, 16) float: c (9), n (3), V, 3 unused; tri_box (faces, 8) int:
  * x0, y0, x1, y1 inclusive pixel bounds (x0 > x1: covers nothing), mesh, face within it,
- * tie-ownership bits of the 3 edges, 0; tile_count (n_tiles) int, then each tile's cursor (its
- * first slot, advanced by ndrf_raster_bin); tile_start (n_tiles + 1) int; list (capacity)
- * int; out tri (K, H, W) int (-1: miss), bary (K, H, W) float2, depth (K, H, W) float (inf
- * on a miss). ray_ab: the pixel rays' a
- * (tiles_x * TS floats; NaN past the image's last column, so nothing covers them), then
- * b (height floats) of kernels/camera.h, computed once a frame on the host with the same
- * float32 operations (clrender/ndrf/raster_cl.py).
+ * tie-ownership bits of the 3 edges, 0; tile_count (n_tiles) int, then each tile's cursor
+ * (its first slot, advanced by ndrf_raster_bin); tile_start (n_tiles + 1) int; list
+ * (capacity) int; out tri (K, H, W) int (-1: miss), bary (K, H, W) float2, depth (K, H, W)
+ * float (inf on a miss). ray_ab: the pixel rays' a (tiles_x * TS floats; NaN past the
+ * image's last column, so nothing covers them), then b (height floats) of
+ * kernels/camera.h, computed once a frame on the host with the same float32 operations
+ * (clrender/ndrf/raster_cl.py).
  * -D defines (clrender/ndrf/raster_cl.py): K, TS (tile side: 16, the vector width),
  * TROWS (rows of a tile a work-item covers, dividing TS: TS on CPUs, 1 on GPUs).
  */
@@ -99,8 +99,7 @@ inline int2 pixel_range(float a, float b, int n)
  * v_lo x (v_hi - v_lo) from the vertex of the smaller index: the same value in exact
  * arithmetic, but without the cancellation of two long vectors (a small triangle far from
  * the eye), and, since both triangles of a shared edge compute the same product, still
- * exactly negated between them. Selects, no branch: PoCL vectorises the setup across
- * triangles. */
+ * exactly negated between them. */
 inline void edge_normal(const float *va, const float *vb, int ia, int ib, float s, float *out)
 {
     const int swap = !(ia < ib);
@@ -114,8 +113,8 @@ inline void edge_normal(const float *va, const float *vb, int ia, int ib, float 
 
 /* Triangle g of the concatenated faces: its mesh, camera-space edge normals and inclusive
  * pixel bounds. Returns 0 when it cannot cover a pixel (degenerate, behind the camera, off
- * screen, or between pixel centres); t is then written all the same (straight-line code
- * PoCL vectorises across triangles), its values meaningless. */
+ * screen, or between pixel centres); t is then filled all the same (straight-line code),
+ * its values meaningless. */
 inline int tri_setup(int g, __global const float *cam, int width, int height,
                      __global const int *face_start, __global const int *faces,
                      __global const int *face_ids, __global const float *vertices, Tri *t)
