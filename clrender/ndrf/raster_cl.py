@@ -4,9 +4,9 @@ Per frame, on the device: set up every triangle in camera space and bin it into 
 TS x TS screen tiles its edges may cover (count, prefix sum, fill), then cover each tile's
 pixels with its triangles, a whole tile row as one vector, keeping the nearest triangle per
 pixel and mesh in private memory (a tile owns its pixels: no atomic depth test, so any
-OpenCL 1.1 device runs it), and resolve each pixel's nearest triangle into the hits the
-shader reads: triangle id, Embree's barycentrics (u, v) and the depth along the unit ray,
-recomputed from the pixel ray. The hit buffers stay on the device for
+OpenCL 1.1 device runs it) with the hits the shader reads: triangle id, Embree's
+barycentrics (u, v) and the depth along the unit ray, from the same edge functions (exact
+ray-triangle in camera space, docs/ndrf.md). The hit buffers stay on the device for
 :class:`clrender.ndrf.shader_cl.Shader`; :meth:`Rasteriser.hits` reads them back (tests,
 statistics). :class:`clrender.ndrf.hits.HitCaster` (Embree) is the reference.
 
