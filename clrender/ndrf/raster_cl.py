@@ -75,17 +75,23 @@ def morton_order(points) -> np.ndarray:
     return np.argsort(code, kind="stable").astype(I32)
 
 
-def spatially_ordered(vertices, faces) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
-    """A mesh with its vertices and faces in Morton order (:func:`morton_order`; faces by
-    their centroids): ``((vertices, faces), face_ids)``, face_ids (F,) int32 the index each
-    face had."""
+def vertices_in_morton_order(vertices, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A mesh renumbered with its vertices in Morton order (:func:`morton_order`), faces in
+    their own order: ``(vertices (V, 3) float32, faces (F, 3) int32, perm)``, perm (V,) int32
+    the vertex each row had."""
     vertices = np.asarray(vertices, F32).reshape(-1, 3)
     faces = np.asarray(faces, I32).reshape(-1, 3)
     perm = morton_order(vertices)
     inverse = np.empty_like(perm)
     inverse[perm] = np.arange(len(perm), dtype=I32)
-    faces = inverse[faces] if len(faces) else faces
-    vertices = vertices[perm]
+    return vertices[perm], inverse[faces] if len(faces) else faces, perm
+
+
+def spatially_ordered(vertices, faces) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """A mesh with its vertices and faces in Morton order (:func:`morton_order`; faces by
+    their centroids): ``((vertices, faces), face_ids)``, face_ids (F,) int32 the index each
+    face had."""
+    vertices, faces, _ = vertices_in_morton_order(vertices, faces)
     face_ids = morton_order(vertices[faces].mean(axis=1)) if len(faces) else np.zeros(0, I32)
     return (vertices, faces[face_ids]), face_ids
 

@@ -32,7 +32,7 @@ from ..device import (check_allocation, device_type_name, event_ms, get_runtime,
                       work_group_size)
 from .baked import validate
 from .config import FEATURES, NDRFConfig
-from .raster_cl import morton_order, packed_geometry
+from .raster_cl import packed_geometry, vertices_in_morton_order
 
 F32, I32 = np.float32, np.int32
 KERNELS = ("ndrf_conv0", "ndrf_conv1", "ndrf_screen", "ndrf_zero_padding")
@@ -73,18 +73,15 @@ def kernel_defines(config: NDRFConfig, h_vec: int = 8, seg: int = 1, rows: int =
 
 def packed_meshes(model) -> dict:
     """The K meshes concatenated for the gather, each mesh's vertices in Morton order
-    (:func:`clrender.ndrf.raster_cl.morton_order`: neighbouring pixels' vertex rows lie
-    close in memory), faces in their own order: :func:`clrender.ndrf.raster_cl.packed_geometry`
+    (:func:`clrender.ndrf.raster_cl.vertices_in_morton_order`: neighbouring pixels' vertex
+    rows lie close in memory), faces in their own order: :func:`clrender.ndrf.raster_cl.packed_geometry`
     (``face_start``, ``faces``, ``vertices``), ``features`` (sum V_k, 8) float32 and
     ``vertex_order`` (sum V_k,) int32, the concatenated vertex each row holds."""
     meshes, features, order, offset = [], [], [], 0
     for k in range(model.config.K):
-        vertices, faces, feats = model.mesh(k)
-        perm = morton_order(vertices)
-        inverse = np.empty_like(perm)
-        inverse[perm] = np.arange(len(perm), dtype=I32)
-        meshes.append((np.asarray(vertices, F32)[perm], inverse[np.asarray(faces, I32)]))
-        features.append(np.asarray(feats, F32)[perm])
+        vertices, faces, perm = vertices_in_morton_order(*model.mesh(k)[:2])
+        meshes.append((vertices, faces))
+        features.append(np.asarray(model.mesh(k)[2], F32)[perm])
         order.append(perm + offset)
         offset += len(perm)
     return {**packed_geometry(meshes), "features": np.concatenate(features),
@@ -197,8 +194,8 @@ class Shader:
     def band_rows(self, width: int, height: int) -> int:
         """Image rows shaded a band: all of them where the hidden layer fits the device's
         largest buffer, else as many as fit (at least one; kernels/ndrf_shade.cl)."""
-        pad, row_bytes = self.defines["KSIZE"] - 1, (width + self.defines["KSIZE"] - 1) \
-            * self.defines["H_STRIDE"] * 4
+        pad = self.defines["KSIZE"] - 1
+        row_bytes = (width + pad) * self.defines["H_STRIDE"] * 4
         fits = self.runtime.device.max_mem_alloc_size // row_bytes - pad
         return int(max(1, min(height, fits)))
 
