@@ -325,7 +325,7 @@ __kernel void ndrf_raster_tile(const int width, const int height, __global const
                               & ((e1 > 0.0f) | ((e1 == 0.0f) & own1))
                               & ((e2 > 0.0f) | ((e2 == 0.0f) & own2)) & (en > 0.0f);
             if (!any(cov)) continue;
-            const float16 dist = V / en, inv_en = 1.0f / en;
+            const float16 inv_en = 1.0f / en, dist = V * inv_en;   /* one division */
             const float16 b = best[k][r];
             const int16 better = cov & ((dist < b) | ((dist == b) & (id < best_id[k][r])));
             best[k][r] = select(b, dist, better);
