@@ -19,8 +19,10 @@ not with the model are cut, and the cuts are written into the result:
 Each phase runs in a child process of its own (spawned), so its peak resident memory
 (``ru_maxrss``) is its own. Since a few-step model occupies few cells, the `paper` batch
 (up to 2^21 samples) is measured apart: one training step at full occupancy at two batch
-sizes, their peak memory difference per sample extrapolated to 2^21 samples. Writes
-``OUT/paper-smoke.json`` and prints it.
+sizes, their peak memory difference per sample extrapolated to 2^21 samples. NDRF's views
+are not extrapolated but bounded: the report gives a view's bytes at 800x800 (in memory
+within the training's view budget, which ``ndrf_train`` reports) and what a disk-backed
+view keeps resident. Writes ``OUT/paper-smoke.json`` and prints it.
 """
 from __future__ import annotations
 
@@ -37,6 +39,7 @@ from pathlib import Path
 from clrender.atomic import write_atomic
 
 VIEW_SIZE = 64               # the rendered view's side (pixels)
+DISK_BACKED_VIEW_BYTES = 96  # = clrender.ndrf.view_memory's (tests/test_paper_smoke.py)
 
 
 def _phase(fn, *args) -> dict:
@@ -131,17 +134,22 @@ def ngprt_teacher(data: str, run: str, out: str) -> dict:
 def ndrf_train(data: str, run: str, teacher: str, steps: int, views: int,
                N: int | None) -> dict:
     from clrender.ndrf import mesh
+    from clrender.ndrf.view_memory import view_budget
     from clrender.ndrf.train import TRAIN_PRESETS, train
+    from clrender.runs import pick_device
 
     tcfg = replace(TRAIN_PRESETS["paper"], iterations=steps, n_distill=views,
                    checkpoint_every=steps)
     if N is not None:             # a cut extraction grid: a preset of this process only
         mesh.PRESETS["smoke"] = replace(mesh.PRESETS[tcfg.extract], N=N)
         tcfg = replace(tcfg, extract="smoke")
-    train(data, run, teacher=teacher, preset="paper", train_config=tcfg, progress=False)
+    budget = view_budget(pick_device())          # this process's default, measured here
+    train(data, run, teacher=teacher, preset="paper", train_config=tcfg, progress=False,
+          view_budget=budget)
     meshes = json.loads((Path(run) / "meshes" / "report.json").read_text())["meshes"]
     return {"train": {"iterations": steps, "n_distill": views,
                       "extract_N": mesh.PRESETS[tcfg.extract].N},
+            "view_budget_GB": round(budget / 1e9, 2),
             "meshes": [{k: m[k] for k in ("threshold", "vertices", "faces", "seconds")}
                        for m in meshes]}
 
@@ -154,8 +162,11 @@ def ndrf_bake(run: str, out: str) -> dict:
 
 
 def view_bytes(K: int, height: int, width: int) -> int:
-    """Bytes one training view holds in NDRF's ViewSet (shader_torch.py): tri (K, H, W)
-    int32 + bary (K, H, W, 2) float32 + the (H, W, 3) float32 target."""
+    """Bytes of one training view's arrays in NDRF's ViewSet (shader_torch.py): tri (K, H,
+    W) int32 + bary (K, H, W, 2) float32 + the (H, W, 3) float32 target (a distillation
+    view's float16 target: 6 bytes a pixel less). Held in memory while a training's views fit
+    its view budget (by default half the memory available); beyond it they are disk-backed
+    (memory-mapped files) and a view holds ``DISK_BACKED_VIEW_BYTES`` (96) resident."""
     return height * width * (K * (4 + 8) + 12)
 
 
@@ -185,7 +196,8 @@ def main(argv=None) -> int:
     w = a.work.resolve()
     w.mkdir(parents=True, exist_ok=True)
     data, baked = str(a.data.resolve()), str(w / "ngprt.npz")
-    result = {"data": data, "ndrf_view_MB_800x800_K2": round(view_bytes(2, 800, 800) / 1e6, 2)}
+    result = {"data": data, "ndrf_view_MB_800x800_K2": round(view_bytes(2, 800, 800) / 1e6, 2),
+              "ndrf_view_resident_B_disk_backed": DISK_BACKED_VIEW_BYTES}
     if "ngprt" in a.methods:
         small, large = (_phase(ngprt_batch, data, n) for n in a.batch_samples)
         per_sample = (large["peak_rss_GB"] - small["peak_rss_GB"]) * 1e9 / max(

@@ -7,6 +7,8 @@ Tolerances:
 - model -> torch shader -> baked arrays: bit-equal;
 - a full frame shaded on its coverage box only (training's full-frame path) vs the whole
   frame: values and the loss's gradients within 1e-5 (max abs; float32 sums reordered);
+- views disk-backed (memory-mapped, over the memory budget) vs in memory: equal arrays,
+  windows and targets, and bit-equal trainings (a disk-backed one interrupted and resumed);
 - distillation cameras: r, theta, phi within the training cameras' ranges up to 1e-9 rad /
   world units, optical axis through the centre within 1e-9 (cosine);
 - end-to-end (slow): the baked student beats a constant colour (the mean training pixel) by
@@ -14,7 +16,10 @@ Tolerances:
 """
 from __future__ import annotations
 
+import gc
 import json
+import os
+import tempfile
 from dataclasses import replace
 
 import numpy as np
@@ -29,6 +34,7 @@ from clrender.ndrf.hits import HitCaster
 from clrender.ndrf.random_model import random_ndrf_model
 from clrender.ndrf.shader_ref import shade_reference
 from clrender.ndrf.shader_torch import NDRFShader, ViewSet, coverage_boxes, crop, shade_image
+from clrender.ndrf.view_memory import VIEW_BUDGET_ENV, parse_bytes, view_budget
 from clrender.ndrf.train import MODEL_OPTIONS, TrainConfig, configs, learning_rate, model_spec
 
 TOL = 1e-5
@@ -124,6 +130,87 @@ def test_coverage_boxes():
     tri[0, 1, 1, 2] = tri[0, 0, 3, 4] = 7
     tri[2, :, :, :] = 0
     assert coverage_boxes(tri).tolist() == [[1, 2, 3, 3], [0, 0, 5, 6], [0, 0, 5, 6]]
+
+
+def _mapped_file(tensor) -> str | None:
+    """The file /proc/self/maps names for the mapping that holds ``tensor``'s data ("" for
+    anonymous memory), None when the mapping is not found."""
+    ptr = tensor.data_ptr()
+    for line in open("/proc/self/maps"):
+        parts = line.split(maxsplit=5)
+        lo, hi = (int(x, 16) for x in parts[0].split("-"))
+        if lo <= ptr < hi:
+            return parts[5].strip() if len(parts) > 5 else ""
+    return None
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float16])   # training, distillation targets
+def test_viewset_over_budget_is_disk_backed_and_equal(tmp_path, monkeypatch, dtype):
+    model = random_ndrf_model(NDRFConfig(), seed=5)
+    cams = [Camera.from_fov(np.deg2rad(30.0), 36, 28, look_at([0.3 * i, -4.5, 1.0], [0.2, 0, 0]))
+            for i in range(3)]
+    images = np.random.default_rng(2).uniform(0, 1, (3, 28, 36, 3)).astype(dtype)
+    ram = ViewSet.build(model, cams, images, "cpu", budget=1 << 40)
+    need = ViewSet.array_bytes(3, 2, 28, 36, images.itemsize)
+    assert not ram.disk_backed and ram.resident_bytes == need + 3 * 96
+    at_limit = ViewSet.build(model, cams, images, "cpu", budget=need, folder=tmp_path)
+    assert not at_limit.disk_backed
+    disk = ViewSet.build(model, cams, images, "cpu", budget=need - 1, folder=tmp_path)
+    assert disk.disk_backed and disk.resident_bytes == 3 * 96
+    assert list(tmp_path.iterdir()) == []          # the files' names are gone at once
+    if os.path.exists("/proc/self/maps"):          # ... their data mapped until freed
+        for t in (disk.tri, disk.bary, disk.images):
+            where = _mapped_file(t)
+            assert where.startswith(str(tmp_path)) and where.endswith("(deleted)"), where
+        assert not (_mapped_file(ram.tri) or "").startswith(str(tmp_path))
+    for name in ("tri", "bary", "images", "cams"):
+        a, b = getattr(ram, name), getattr(disk, name)
+        assert a.dtype == b.dtype and a.device == b.device and torch.equal(a, b), name
+    assert np.array_equal(ram.boxes, disk.boxes) and (ram.tri >= 0).any()
+    for args in [(1, 0, 0, 28, 36), (2, 5, 7, 10, 12), (0, 20, 30, 8, 6)]:
+        for a, b in zip(ram.window(*args, 1), disk.window(*args, 1)):
+            assert torch.equal(a, b)
+        t = disk.target(*args)
+        assert t.dtype == torch.float32 and torch.equal(t, ram.target(*args))
+    shader = NDRFShader.from_model(model)
+    bg = torch.as_tensor(model.background)
+    with torch.no_grad():
+        assert torch.equal(ram.frame(shader, 1, bg), disk.frame(shader, 1, bg))
+    # Without a folder: the temporary directory, nothing left there either; and the
+    # budget from the environment.
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.setenv(VIEW_BUDGET_ENV, "1k")
+    assert view_budget() == 1000 and view_budget(budget="2G") == 2 * 10 ** 9
+    again = ViewSet.build(model, cams, images, "cpu")
+    assert again.disk_backed and torch.equal(again.bary, ram.bary)
+    assert list(tmp_path.iterdir()) == []
+    del disk, again, t
+    gc.collect()
+    if os.path.exists("/proc/self/maps"):          # freed with the views
+        assert str(tmp_path) not in open("/proc/self/maps").read()
+
+
+def test_viewset_on_a_full_disk_fails_at_build(tmp_path, monkeypatch):
+    import errno
+
+    def full(fd, offset, size):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(os, "posix_fallocate", full, raising=False)
+    model = random_ndrf_model(NDRFConfig(), seed=5)
+    cam = Camera.from_fov(0.7, 8, 6, look_at([0.0, -3.0, 0.5]))
+    with pytest.raises(OSError, match="disk-backed views do not fit"):
+        ViewSet.build(model, [cam], np.zeros((1, 6, 8, 3), np.float32), "cpu", budget=0,
+                      folder=tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_parse_bytes():
+    assert [parse_bytes(t) for t in ("0", "12G", "500MB", "12e9", "1.5k", 7)] == \
+        [0, 12 * 10 ** 9, 5 * 10 ** 8, 12 * 10 ** 9, 1500, 7]
+    for bad in ("x", "-1", "12Q", ""):
+        with pytest.raises(ValueError, match="byte count"):
+            parse_bytes(bad)
 
 
 def _ring_cameras(az_deg, el_deg, radius, up=(0.0, 0.0, 1.0)):
@@ -275,6 +362,55 @@ def test_train_resume_and_bake(tmp_path, small_run_inputs, monkeypatch):
     assert np.array_equal(model.arrays["conv0_w"],
                           state_b["conv0.weight"].permute(2, 3, 1, 0).numpy())
     assert model.background == (1.0, 1.0, 1.0)
+
+
+def test_disk_backed_training_equals_in_memory(tmp_path, small_run_inputs, monkeypatch):
+    """Views forced onto disk (a 1-byte budget) train the same model bit for bit as views in
+    memory, also when the disk-backed run is interrupted and resumed; the budget is not in
+    the run's config, so a run resumes whatever its budget; no file is left behind."""
+    from clrender.ndrf import train as ndrf_train
+    from clrender.runs import RunFolder
+
+    teacher, ds = small_run_inputs
+    tcfg = replace(ndrf_train.TRAIN_PRESETS["tiny"], iterations=12, n_distill=4,
+                   checkpoint_every=6, log_every=1, patch=0)        # full frames: the boxes
+    built = []
+    build = ViewSet.build.__func__
+
+    def spy(cls, *args, **kwargs):
+        built.append(build(cls, *args, **kwargs))
+        return built[-1]
+
+    monkeypatch.setattr(ViewSet, "build", classmethod(spy))
+    run_a = ndrf_train.train(ds, tmp_path / "a", teacher, preset="tiny", progress=False,
+                             train_config=tcfg, view_budget="1T")
+    assert [v.disk_backed for v in built] == [False, False]
+    save = RunFolder.save_checkpoint
+
+    def save_then_stop(run, state):
+        save(run, state)
+        if state["step"] == 6:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(RunFolder, "save_checkpoint", save_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        ndrf_train.train(ds, tmp_path / "b", teacher, preset="tiny", progress=False,
+                         train_config=tcfg, view_budget=1)
+    monkeypatch.setattr(RunFolder, "save_checkpoint", save)
+    monkeypatch.setenv(VIEW_BUDGET_ENV, "0")
+    run_b = ndrf_train.train(ds, tmp_path / "b", teacher, preset="tiny", progress=False,
+                             train_config=tcfg)
+    assert [v.disk_backed for v in built[2:]] == [True] * 4
+    assert (run_a / "config.json").read_text() == (run_b / "config.json").read_text()
+    (step_a, state_a), (step_b, state_b) = _features(run_a), _features(run_b)
+    assert step_a == step_b == 12 and state_a.keys() == state_b.keys()
+    for name in state_a:
+        assert torch.equal(state_a[name], state_b[name]), name
+    logs = [[(r["step"], r["phase"], r["view"], r["loss"]) for r in map(
+        json.loads, (run / "log.jsonl").read_text().splitlines())] for run in (run_a, run_b)]
+    assert logs[0] == logs[1] and {r[1] for r in logs[0]} == {"distill", "train"}
+    assert sorted(p.name for p in run_a.iterdir()) == sorted(p.name for p in run_b.iterdir())
+    assert not list(tmp_path.rglob(".ndrf-views-*"))
 
 
 @pytest.mark.slow

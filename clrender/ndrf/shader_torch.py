@@ -21,6 +21,7 @@ from ..ngprt.torch_ops import weighted_gather
 from .baked import NDRFModel
 from .config import NDRFConfig
 from .hits import HitCaster
+from .view_memory import DISK_BACKED_VIEW_BYTES, disk_arrays, view_budget
 
 F32 = np.float32
 
@@ -182,30 +183,70 @@ def coverage_boxes(tri: np.ndarray) -> np.ndarray:
 @dataclass
 class ViewSet:
     """Views with their hits cast once: tri (N, K, H, W) int32, bary (N, K, H, W, 2)
-    float32, images (N, H, W, 3) targets, cams (N, 16) packed cameras, on one device;
-    boxes (N, 4) int64 numpy, :func:`coverage_boxes` of tri."""
+    float32, images (N, H, W, 3) targets (the dtype given), cams (N, 16) packed cameras;
+    boxes (N, 4) int64 numpy, :func:`coverage_boxes` of tri.
+
+    In memory, every tensor is on the device; disk-backed (``disk_backed``), tri, bary and
+    images are CPU tensors on memory-mapped files (pages read from disk when a step takes
+    them, reclaimable cache) and only cams are on the device: :meth:`window` and
+    :meth:`target` bring the part of the one view a step reads to the device."""
 
     tri: torch.Tensor
     bary: torch.Tensor
     images: torch.Tensor
     cams: torch.Tensor
     boxes: np.ndarray
+    disk_backed: bool = False
+
+    @staticmethod
+    def array_bytes(n: int, K: int, height: int, width: int, image_itemsize: int = 4) -> int:
+        """Bytes of the tri, bary and images arrays of n views: (K x 12 + 3 x itemsize)
+        a pixel a view, 23.04 MB a view at 800x800 with K = 2 and float32 targets."""
+        return n * height * width * (K * (4 + 8) + 3 * image_itemsize)
 
     @classmethod
-    def build(cls, meshes, cameras, images, device) -> "ViewSet":
-        """Cast every view's hits once into arrays allocated once (hits gathered in a list
-        and then stacked were held twice): (K x 12 + 12) bytes a pixel with the float32
-        target, 23 MB a view at 800x800 with K = 2."""
+    def build(cls, meshes, cameras, images, device, budget=None, folder=None) -> "ViewSet":
+        """Cast every view's hits once, view by view, into arrays allocated once.
+
+        Args:
+            meshes: as :class:`HitCaster`; cameras: N cameras of one size; images (N, H, W,
+                3) their targets (kept in their dtype).
+            budget: bytes the arrays may hold in memory (:func:`view_budget`; default:
+                :data:`VIEW_MEMORY_FRACTION` of the memory available on ``device``). When
+                :meth:`array_bytes` exceeds it, they are disk-backed: ``.npy`` memory maps
+                in ``folder`` (default the temporary directory), removed from the folder at
+                once and freed with the arrays. Either way, the same values.
+        Resident memory: all the arrays in memory (the images shared with ``images`` on
+        CPU); disk-backed, 96 bytes a view (cams and boxes), the one view being cast, and
+        what the page cache keeps of the files (clean pages the system reclaims).
+        """
+        dev = torch.device(device)
         caster = HitCaster(meshes)
-        first = caster.cast_camera(cameras[0])
-        tri = np.empty((len(cameras),) + first.tri.shape, np.int32)
-        bary = np.empty((len(cameras),) + first.bary.shape, F32)
+        images = np.asarray(images)
+        n, K = len(cameras), caster.K
+        H, W = cameras[0].height, cameras[0].width
+        if images.shape != (n, H, W, 3):
+            raise ValueError(f"ViewSet: images of shape {images.shape}, expected {(n, H, W, 3)}")
+        budget = view_budget(dev, budget)
+        disk = cls.array_bytes(n, K, H, W, images.dtype.itemsize) > budget
+        if disk:
+            mm = disk_arrays(folder, {"tri": ((n, K, H, W), np.int32),
+                                       "bary": ((n, K, H, W, 2), F32),
+                                       "images": (images.shape, images.dtype)})
+            tri, bary, imgs = (torch.from_numpy(mm[k]) for k in ("tri", "bary", "images"))
+        else:
+            tri = torch.empty((n, K, H, W), dtype=torch.int32, device=dev)
+            bary = torch.empty((n, K, H, W, 2), dtype=torch.float32, device=dev)
+            imgs = torch.as_tensor(np.ascontiguousarray(images), device=dev)
+        boxes = np.empty((n, 4), np.int64)
         for i, camera in enumerate(cameras):
-            hits = first if i == 0 else caster.cast_camera(camera)
-            tri[i], bary[i] = hits.tri, hits.bary
-        as_t = lambda a: torch.as_tensor(np.ascontiguousarray(a), device=device)  # noqa: E731
-        return cls(as_t(tri), as_t(bary), as_t(images),
-                   as_t(np.stack([c.packed() for c in cameras])), coverage_boxes(tri))
+            hits = caster.cast_camera(camera)
+            tri[i], bary[i] = torch.from_numpy(hits.tri), torch.from_numpy(hits.bary)
+            boxes[i] = coverage_boxes(hits.tri[None])[0]
+            if disk:
+                imgs[i] = torch.from_numpy(np.ascontiguousarray(images[i]))
+        cams = torch.as_tensor(np.stack([c.packed() for c in cameras]), device=dev)
+        return cls(tri, bary, imgs, cams, boxes, disk)
 
     def __len__(self) -> int:
         return len(self.tri)
@@ -218,10 +259,30 @@ class ViewSet:
     def width(self) -> int:
         return self.tri.shape[3]
 
+    @property
+    def device(self) -> torch.device:
+        """The device a step's tensors are on (the training's)."""
+        return self.cams.device
+
+    @property
+    def resident_bytes(self) -> int:
+        """Bytes the views hold in memory (host or device): all their arrays', or when
+        disk-backed only cams' and boxes' (:data:`DISK_BACKED_VIEW_BYTES` a view)."""
+        held = (self.cams,) if self.disk_backed else (self.tri, self.bary, self.images, self.cams)
+        return sum(t.numel() * t.element_size() for t in held) + self.boxes.nbytes
+
     def window(self, i: int, y0: int, x0: int, ph: int, pw: int, halo: int):
-        """:func:`crop` of view i with its ray directions: (tri, bary, dirs, inside)."""
+        """:func:`crop` of view i with its ray directions: (tri, bary, dirs, inside), on
+        :attr:`device` (disk-backed views of a GPU training: cropped on the host, then
+        moved; the same integers and copies of the same floats)."""
         t, b, inside, rows, cols = crop(self.tri[i], self.bary[i], y0, x0, ph, pw, halo)
+        if t.device != self.device:
+            t, b, inside, rows, cols = (a.to(self.device) for a in (t, b, inside, rows, cols))
         return t, b, camera_dirs(self.cams[i], rows, cols), inside
+
+    def target(self, i: int, y0: int, x0: int, ph: int, pw: int) -> torch.Tensor:
+        """(ph, pw, 3) float32 target pixels of view i from (y0, x0), on :attr:`device`."""
+        return self.images[i, y0:y0 + ph, x0:x0 + pw].to(self.device).float()
 
     def frame(self, shader: "NDRFShader", i: int, background: torch.Tensor) -> torch.Tensor:
         """The full (H, W, 3) frame of view i, shading only its coverage box: every pixel

@@ -3,8 +3,11 @@ duplex meshes, distilled from a baked NGP-RT teacher.
 
 The K meshes are extracted once from the teacher (culled with the training cameras) into
 ``RUN/meshes/``; every view's rays are cast into them once (Embree) and the hits kept in
-memory. A step takes one view (a full image or a random patch), gathers the vertex
-features by barycentric weights, runs :class:`NDRFShader` (the torch twin of
+memory, or, beyond a memory budget (``view_budget``: by default half the memory available,
+:func:`clrender.ndrf.view_memory.view_budget`), in memory-mapped files in the run folder
+that are freed when the training ends (:meth:`ViewSet.build`; the same results). A step
+takes one view (a full image or a random patch), gathers the vertex features by
+barycentric weights, runs :class:`NDRFShader` (the torch twin of
 :func:`clrender.ndrf.shader_ref.shade_reference`, docs/ndrf.md) and minimises the MSE.
 The first half of the iterations uses teacher renderings of distillation views, the second
 half the training images (``distill=False``: training images only). Adam, learning rate
@@ -38,6 +41,7 @@ from .config import NDRFConfig, preset as ndrf_preset
 from .init import initial_model, load_meshes
 from .mesh import extract_preset
 from .shader_torch import NDRFShader, ViewSet
+from .view_memory import view_budget as resolve_view_budget
 
 F32 = np.float32
 
@@ -195,7 +199,7 @@ def _bounded_train_set(data, downscale: int):
 def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None,
           seed: int = 0, device=None, progress: bool = True,
           train_config: TrainConfig | None = None, downscale: int = 1, on_step=None,
-          **options) -> Path:
+          view_budget=None, **options) -> Path:
     """Train an NDRF model on the dataset ``data`` (folder or loaded train Dataset) from the
     baked NGP-RT ``teacher`` (path or loaded model) into the run folder ``out``.
 
@@ -210,6 +214,13 @@ def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None
             as ``log.jsonl``; its log line and checkpoint written where due); ``bake()``
             returns the training state as an in-memory :class:`NDRFModel`
             (:func:`bake_shader`).
+        view_budget: bytes (or text as "12G") the views' hits and targets may hold in
+            memory, the training and distillation views together (on a CUDA device, GPU
+            memory); views beyond it are disk-backed: memory-mapped files made in ``out``
+            and unlinked at once, their space freed when the training ends (or dies).
+            Default: ``$CLRENDER_NDRF_VIEW_BUDGET``, else half the memory available
+            (:func:`clrender.ndrf.view_memory.view_budget`). Not part of the run's config:
+            it changes neither the results nor whether a run resumes.
         **options: :data:`MODEL_OPTIONS` (thresholds, kernel_size, distill).
     An existing run with the same config.json is resumed (meshes, distillation views and
     checkpoint reused). Returns the run folder.
@@ -229,14 +240,21 @@ def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None
 
     bg = np.asarray(ds.background, np.float32).reshape(3)
     shader = NDRFShader.from_model(initial_model(cfg, meshes, seed, bg)).to(dev)
-    views = {"train": ViewSet.build(meshes, ds.cameras, ds.images, dev)}
+    budget = resolve_view_budget(dev, view_budget)
+    train_cameras = ds.cameras
+    views = {"train": ViewSet.build(meshes, train_cameras, ds.images, dev, budget, run.dir)}
+    del ds      # read here from a folder: its images are not held beside disk-backed views
     if tcfg.distill and tcfg.n_distill > 0:
         from .distill import cached_distillation
 
-        cams, images = cached_distillation(run.dir, teacher_model, ds.cameras, tcfg.n_distill,
-                                           seed, bg, json.dumps(teacher_id, sort_keys=True),
+        cams, images = cached_distillation(run.dir, teacher_model, train_cameras,
+                                           tcfg.n_distill, seed, bg,
+                                           json.dumps(teacher_id, sort_keys=True),
                                            progress=progress)
-        views["distill"] = ViewSet.build(meshes, cams, images, dev)
+        views["distill"] = ViewSet.build(meshes, cams, images, dev,
+                                         max(0, budget - views["train"].resident_bytes),
+                                         run.dir)
+        del images  # disk-backed distillation views: the targets live in their file only
     opt = torch.optim.Adam(shader.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas),
                            eps=tcfg.eps)
     state = run.resume(shader, opt, dev)
@@ -272,7 +290,7 @@ def _loop(shader, opt, views, bg, start, tcfg, seed, run, progress, on_step=None
         else:
             rgb = shader(*vs.window(i, y0, x0, ph, pw, shader.config.kernel_size - 1),
                          background=bg)
-        target = vs.images[i, y0:y0 + ph, x0:x0 + pw].float()
+        target = vs.target(i, y0, x0, ph, pw)
         loss = F.mse_loss(rgb, target)
         opt.zero_grad(set_to_none=True)
         loss.backward()
