@@ -314,6 +314,24 @@ def _features(run):
     return int(state["step"]), {k: v for k, v in state["model"].items()}
 
 
+
+def _train_stopped_at(monkeypatch, step: int, *args, **kwargs) -> None:
+    """NDRF's train(*args, **kwargs) interrupted right after its checkpoint at ``step``."""
+    from clrender.ndrf import train as ndrf_train
+    from clrender.runs import RunFolder
+
+    save = RunFolder.save_checkpoint
+
+    def save_then_stop(run, state):
+        save(run, state)
+        if state["step"] == step:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(RunFolder, "save_checkpoint", save_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        ndrf_train.train(*args, **kwargs)
+    monkeypatch.setattr(RunFolder, "save_checkpoint", save)
+
 def test_train_resume_and_bake(tmp_path, small_run_inputs, monkeypatch):
     from clrender.ndrf import train as ndrf_train
     from clrender.ndrf.baked import load_baked
@@ -327,20 +345,8 @@ def test_train_resume_and_bake(tmp_path, small_run_inputs, monkeypatch):
     assert step == 20 and set(state_a) == {"features.0", "features.1", "conv0.weight",
                                            "conv0.bias", "conv1.weight", "conv1.bias"}
     # An interrupted run resumes from its checkpoint and ends where the whole run ended.
-    from clrender.runs import RunFolder
-
-    save = RunFolder.save_checkpoint
-
-    def save_then_stop(run, state):
-        save(run, state)
-        if state["step"] == 10:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(RunFolder, "save_checkpoint", save_then_stop)
-    with pytest.raises(KeyboardInterrupt):
-        ndrf_train.train(ds, tmp_path / "b", teacher, preset="tiny", progress=False,
-                         train_config=tcfg)
-    monkeypatch.setattr(RunFolder, "save_checkpoint", save)
+    _train_stopped_at(monkeypatch, 10, ds, tmp_path / "b", teacher, preset="tiny",
+                      progress=False, train_config=tcfg)
     assert _features(tmp_path / "b")[0] == 10
     run_b = ndrf_train.train(ds, tmp_path / "b", teacher, preset="tiny", progress=False,
                              train_config=tcfg)
@@ -369,7 +375,6 @@ def test_disk_backed_training_equals_in_memory(tmp_path, small_run_inputs, monke
     memory, also when the disk-backed run is interrupted and resumed; the budget is not in
     the run's config, so a run resumes whatever its budget; no file is left behind."""
     from clrender.ndrf import train as ndrf_train
-    from clrender.runs import RunFolder
 
     teacher, ds = small_run_inputs
     tcfg = replace(ndrf_train.TRAIN_PRESETS["tiny"], iterations=12, n_distill=4,
@@ -385,18 +390,8 @@ def test_disk_backed_training_equals_in_memory(tmp_path, small_run_inputs, monke
     run_a = ndrf_train.train(ds, tmp_path / "a", teacher, preset="tiny", progress=False,
                              train_config=tcfg, view_budget="1T")
     assert [v.disk_backed for v in built] == [False, False]
-    save = RunFolder.save_checkpoint
-
-    def save_then_stop(run, state):
-        save(run, state)
-        if state["step"] == 6:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(RunFolder, "save_checkpoint", save_then_stop)
-    with pytest.raises(KeyboardInterrupt):
-        ndrf_train.train(ds, tmp_path / "b", teacher, preset="tiny", progress=False,
-                         train_config=tcfg, view_budget=1)
-    monkeypatch.setattr(RunFolder, "save_checkpoint", save)
+    _train_stopped_at(monkeypatch, 6, ds, tmp_path / "b", teacher, preset="tiny",
+                      progress=False, train_config=tcfg, view_budget=1)
     monkeypatch.setenv(VIEW_BUDGET_ENV, "0")
     run_b = ndrf_train.train(ds, tmp_path / "b", teacher, preset="tiny", progress=False,
                              train_config=tcfg)
