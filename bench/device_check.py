@@ -10,7 +10,9 @@ and 1920x1080 on the chosen device (``$CLRENDER_DEVICE``, PoCL here) as referenc
 then lists every platform and device, renders the same views of the same files on each,
 and reports per device, method and size the frame time (median of ``--repeats`` after a
 warm-up), the PSNR and largest difference against the reference, and writes
-``device_check.{md,json}``.
+``device_check.{md,json}``. Each device is checked in a process of its own: a driver that
+crashes (at a build, a render or its own teardown: pip's PoCL 3.0 aborts at exit on CPUs its
+LLVM does not know) is that device's finding, not the end of the check.
 
 It needs numpy, pyopencl and embreex only (no torch, scipy or scikit-image), so it runs on
 a machine that reaches no package registry with those three as wheels beside the folder
@@ -21,6 +23,9 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import subprocess
+import sys
+import tempfile
 import traceback
 from pathlib import Path
 
@@ -32,6 +37,8 @@ from clrender.device import device_info, list_devices
 from clrender.metrics import psnr, summarize_ms
 from clrender.paths import path_cameras
 from clrender.renderer import Renderer
+
+from .sizes import parse_size
 
 SIZES = ((800, 800), (1920, 1080))
 MODELS = ("ngprt", "ndrf")
@@ -74,8 +81,10 @@ def make_reference(folder: Path, device=None) -> None:
          "sizes": [list(s) for s in SIZES]}, indent=2))
 
 
-def check_device(index: int, folder: Path, reference: dict, repeats: int) -> list[dict]:
-    """Rows for device ``index`` of :func:`list_devices`: each method and size, or the error."""
+def check_device(index: int, folder: Path, reference: dict, repeats: int,
+                 sizes=SIZES) -> list[dict]:
+    """Rows for device ``index`` of :func:`list_devices`: each method and size, or the error
+    (in this process; :func:`check_device_apart` runs it in a process of its own)."""
     rows = []
     for method in MODELS:
         try:
@@ -83,7 +92,7 @@ def check_device(index: int, folder: Path, reference: dict, repeats: int) -> lis
         except Exception as e:          # noqa: BLE001 - a device that cannot build is a finding
             rows.append({"method": method, "error": f"{type(e).__name__}: {e}"})
             continue
-        for w, h in SIZES:
+        for w, h in sizes:
             row = {"method": method, "size": f"{w}x{h}"}
             try:
                 camera = _camera(w, h)
@@ -99,6 +108,29 @@ def check_device(index: int, folder: Path, reference: dict, repeats: int) -> lis
             rows.append(row)
             print(index, row, flush=True)
     return rows
+
+
+def check_device_apart(index: int, folder: Path, repeats: int, sizes) -> tuple[list[dict], str]:
+    """:func:`check_device` in a child process: ``(rows, exit)``, exit "" for a clean exit,
+    else what ended the child (its rows kept where it wrote them before dying)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        rows_file = Path(tmp) / "rows.json"
+        proc = subprocess.run(     # from the folder bench/ is in, whatever the caller's
+            [sys.executable, "-m", "bench.device_check", "--reference", str(folder.resolve()),
+             "--device-index", str(index), "--rows-out", str(rows_file),
+             "--repeats", str(repeats), "--sizes", *(f"{w}x{h}" for w, h in sizes)],
+            capture_output=True, text=True, cwd=Path(__file__).resolve().parent.parent)
+        print(proc.stdout, end="", flush=True)
+        rows = json.loads(rows_file.read_text()) if rows_file.exists() else None
+    if proc.returncode == 0 and rows is not None:
+        return rows, ""
+    how = (f"signal {-proc.returncode}" if proc.returncode < 0
+           else f"exit status {proc.returncode}")
+    tail = " ".join(proc.stderr.strip().splitlines()[-2:])[-300:]
+    exit_note = f"its process ended with {how} ({tail})"
+    if rows is None:
+        rows = [{"method": m, "error": f"no result: {exit_note}"} for m in MODELS]
+    return rows, exit_note
 
 
 def markdown(devices: list[dict], meta: dict) -> str:
@@ -120,19 +152,28 @@ def markdown(devices: list[dict], meta: dict) -> str:
             lines.append(f"| {d['name']} | {d['type']} | {r['method']} | {r['size']} | "
                          f"{ms:.1f} | {1000 / ms:.1f} | {r['psnr']:.1f} | "
                          f"{r['max_abs_diff']:.1e} |")
+    ended = [f"- {d['name']}: {d['exit']}" for d in devices if d.get("exit")]
+    if ended:
+        lines += ["", "Devices whose check process did not exit cleanly (rows above as "
+                  "written before):", *ended]
     return "\n".join(lines) + "\n"
 
 
-def run(folder: Path, out: Path, repeats: int) -> list[dict]:
+def load_reference(folder: Path) -> dict:
     with np.load(folder / "reference.npz", allow_pickle=False) as npz:
-        reference = {k: npz[k] for k in npz.files}
+        return {k: npz[k] for k in npz.files}
+
+
+def run(folder: Path, out: Path, repeats: int) -> list[dict]:
+    sizes = tuple(SIZES)
     devices = []
     for index, device in enumerate(list_devices()):
         info = device_info(device)
         name = f"{info['platform']} / {info['device']}"
         print(f"[{index}] {name}", flush=True)
+        rows, exit_note = check_device_apart(index, folder, repeats, sizes)
         devices.append({"index": index, "name": name, "type": info["type"], "info": info,
-                        "rows": check_device(index, folder, reference, repeats)})
+                        "rows": rows, "exit": exit_note})
     meta = {"reference": json.loads((folder / "reference.json").read_text()),
             "repeats": repeats, "date": datetime.datetime.now().isoformat(timespec="seconds")}
     text = markdown(devices, meta)
@@ -154,9 +195,18 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=Path("results"))
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--device", default=None, help="device for --make-reference")
+    # One device's check in its own process (run() starts these).
+    p.add_argument("--device-index", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--rows-out", type=Path, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--sizes", nargs="+", type=parse_size, default=list(SIZES),
+                   help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.make_reference:
         make_reference(args.make_reference, args.device)
+    elif args.device_index is not None:
+        rows = check_device(args.device_index, args.reference, load_reference(args.reference),
+                            args.repeats, args.sizes)
+        write_atomic(args.rows_out, json.dumps(rows))
     else:
         run(args.reference, args.out, args.repeats)
     return 0
