@@ -181,9 +181,18 @@ def test_large_image_renders_and_too_large_is_refused():
     far = Camera.from_fov(0.05, 4096, 4096, look_at([30.0, -20.0, 10.0]))
     out = Renderer(model).render(far)
     assert out["rgb"].shape == (4096, 4096, 3) and 0 < (out["rgb"] != model.background).mean()
-    huge = Camera.from_fov(0.9, 16384, 16384, look_at([3.0, -2.0, 1.0]))
-    with pytest.raises(ValueError, match=r"buffer '\w+' for 16384x16384 pixels.*: needs"):
-        Renderer(model).render(huge)
+    # The smallest square image whose barycentrics buffer (8 bytes a pixel and mesh, the
+    # largest) exceeds the device's largest allocation is refused naming that buffer; past
+    # 2^31 hit slots the int32 indices refuse it first. (PoCL sizes its allocation limit
+    # from the memory free when it starts, so the side is computed, not fixed.)
+    renderer = Renderer(model)
+    limit = renderer.runtime.device.max_mem_alloc_size
+    side = int(np.sqrt(limit / (8 * 2))) + 1
+    huge = Camera.from_fov(0.9, side, side, look_at([3.0, -2.0, 1.0]))
+    expected = (rf"buffer 'bary' for {side}x{side} pixels.*: needs" if 2 * side * side < 2 ** 31
+                else "more hit slots than the rasteriser's int32 indices address")
+    with pytest.raises(ValueError, match=expected):
+        renderer.render(huge)
 
 
 def test_unknown_hit_source_is_refused():
