@@ -33,10 +33,9 @@ import numpy as np
 
 from bench.limits import flop_rate, gather_rate
 from bench.ngprt_kernels import TRAINED_SIZES
-from bench.sizes import at_size, parse_size
+from bench.sizes import at_size, parse_size, trained_test_set
 from clrender import methods
 from clrender.atomic import write_atomic
-from clrender.data import load_dataset
 from clrender.metrics import summarize_ms
 from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.random_model import random_ndrf_model
@@ -203,6 +202,8 @@ def main(argv=None) -> int:
     p.add_argument("--data", default=None, type=Path, help="its dataset (test cameras)")
     p.add_argument("--frames", nargs="+", default=list(TRAINED_SIZES),
                    help="frame sizes WxH besides the test size (trained model)")
+    p.add_argument("--downscale", type=int, default=None, metavar="N",
+                   help="with --data: read its images_N/ (default: the model's training one)")
     p.add_argument("--teacher", default=None, help="a baked NGP-RT model to time beside it")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--out", default="results", type=Path)
@@ -217,7 +218,7 @@ def main(argv=None) -> int:
     if args.data is None:
         p.error("--model needs --data (the dataset whose test cameras to render)")
     model = methods.load(args.model)
-    cams = load_dataset(args.data, split="test").cameras
+    cams = trained_test_set(args.model, args.data, args.downscale).cameras
     frames = {f"{cams[0].width}x{cams[0].height}": cams}
     for text in args.frames:
         w, h = parse_size(text)

@@ -39,10 +39,9 @@ from pathlib import Path
 import numpy as np
 
 from bench.limits import deferred_bound, march_bound, measure_limits
-from bench.sizes import at_size, parse_size
+from bench.sizes import at_size, parse_size, trained_test_set
 from clrender.atomic import write_atomic
 from clrender.device import get_runtime
-from clrender.data import load_dataset
 from clrender.metrics import summarize_ms
 from clrender.ngprt.baked import load_baked
 from clrender.ngprt.config import VARIANTS, preset
@@ -266,12 +265,13 @@ def trained_markdown(rows: list[dict], meta: dict) -> str:
 
 
 def run_trained(model_path: Path, data: Path, sizes, repeats: int, out: Path, device=None,
-                exact: bool = False, views: int | None = None, baseline=None) -> list[dict]:
-    """Times a trained model on its dataset's test cameras at the test size and at
-    ``sizes`` ("WxH", :func:`bench.sizes.at_size`), with G; writes
-    ``<out>/ngprt_kernels_<model stem>.{md,json}``."""
+                exact: bool = False, views: int | None = None, baseline=None,
+                downscale: int | None = None) -> list[dict]:
+    """Times a trained model on its dataset's test cameras (at ``downscale``, default the
+    model's training one) at the test size and at ``sizes`` ("WxH",
+    :func:`bench.sizes.at_size`), with G; writes ``<out>/ngprt_kernels_<model stem>.{md,json}``."""
     model = load_baked(model_path)
-    ds = load_dataset(data, split="test")
+    ds = trained_test_set(model_path, data, downscale)
     cameras = ds.cameras[:views]
     if not cameras:
         raise ValueError(f"{data}: the test split has no cameras")
@@ -326,12 +326,15 @@ def main(argv=None) -> int:
                         f"(default {' '.join(TRAINED_SIZES)})")
     p.add_argument("--views", type=int, default=None,
                    help="with --model: the first N test cameras (default all)")
+    p.add_argument("--downscale", type=int, default=None, metavar="N",
+                   help="with --data: read its images_N/ (default: the model's training one)")
     args = p.parse_args(argv)
     if (args.model is None) != (args.data is None):
         p.error("--model and --data go together")
     if args.model is not None:
         run_trained(args.model, args.data, args.sizes or TRAINED_SIZES, args.repeats,
-                    args.out, args.device, args.exact, args.views, args.baseline)
+                    args.out, args.device, args.exact, args.views, args.baseline,
+                    args.downscale)
         return 0
     run(args.size, args.repeats, args.preset, args.scene, min(args.ref_size, args.size),
         args.out, args.device, L_C=args.L_C, exact=args.exact,

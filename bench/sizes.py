@@ -1,8 +1,20 @@
-"""Frame sizes of the kernel benchmarks (``bench.ngprt_kernels``, ``bench.ndrf_kernels``):
-a "WIDTHxHEIGHT" argument parsed, and a test camera resized to it."""
+"""Frames of the kernel benchmarks (``bench.ngprt_kernels``, ``bench.ndrf_kernels``): a
+trained model's test split, a "WIDTHxHEIGHT" argument parsed, and a test camera resized
+to it."""
 from __future__ import annotations
 
 from dataclasses import replace
+
+
+def trained_test_set(model_path, data, downscale: int | None = None):
+    """The test split of dataset ``data`` at ``downscale``, by default the one the baked
+    model at ``model_path`` was trained at (its manifest; ``clrender eval`` does the same)."""
+    from clrender.bakedfile import trained_downscale
+    from clrender.data import load_dataset
+
+    if downscale is None:
+        downscale = trained_downscale(model_path)
+    return load_dataset(data, split="test", downscale=downscale)
 
 
 def at_size(camera, width: int, height: int):

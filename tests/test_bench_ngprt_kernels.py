@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from bench.ngprt_kernels import main, measure
-from bench.sizes import at_size
+from bench.sizes import at_size, trained_test_set
 from clrender.camera import Camera, look_at
 from clrender.data import make_scene
 from clrender.device import _kernel_dir
@@ -44,6 +44,21 @@ def test_trained_model_benchmark_writes_a_row_per_size(tmp_path):
     table = [line for line in text.splitlines() if line.startswith("| ") and "shared-v" in line]
     assert [line.split(" | ")[0] for line in table] == ["| 24x16", "| 32x32", "| 40x20"]
     assert "vs mlp" not in text
+
+
+def test_trained_model_cameras_at_its_training_downscale(tmp_path):
+    """A model baked from a run at --downscale 2 is timed on its test cameras at that size
+    (as `clrender eval` does), unless --downscale says otherwise."""
+    scene = make_scene("bounded", tmp_path / "scene", n_train=1, n_test=2, width=24, height=16)
+    model = random_baked_model(preset("tiny"), 0)
+    path = save_baked(model, tmp_path / "m.npz", trained_on={"data": str(scene), "downscale": 2})
+    assert [(c.width, c.height) for c in trained_test_set(path, scene).cameras] == [(12, 8)] * 2
+    assert trained_test_set(path, scene, downscale=1).cameras[0].width == 24
+    out = tmp_path / "results"
+    assert main(["--model", str(path), "--data", str(scene), "--sizes", "12x8", "--repeats",
+                 "1", "--out", str(out)]) == 0
+    rows = json.loads((out / "ngprt_kernels_m.json").read_text())["rows"]
+    assert [r["size"] for r in rows] == ["12x8"]
 
 
 def test_at_size_keeps_the_pixel_aspect_and_the_vertical_field():
