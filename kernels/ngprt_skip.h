@@ -133,77 +133,85 @@ inline vint v_skip(const ngp_model *m, const v_rays *r, const v_march_point *p, 
     return select(k_next, max(k_next, k_g), VMASK(g > 0));
 }
 #else
-/* A face f + beta (t' - t) >= 0 of a box (where `on`): the point at t must satisfy it,
- * and it bounds t' - t by f / -beta when beta < 0. */
-inline void ngp_face(float f, float beta, bool on, float *dt, bool *inside)
+/* A face f + beta (t' - t) >= 0 of a box, in the lanes of `on`: the point at t must
+ * satisfy it, and it bounds t' - t by f / -beta where beta < 0. */
+inline void v_face(vfloat f, vfloat beta, vint on, vfloat *dt, vint *inside)
 {
-    if (!on) return;
-    *inside = *inside && f >= 0.0f;
-    if (beta < 0.0f) *dt = ngp_minf(*dt, f / -beta);
+    *inside = *inside & (~on | VMASK(f >= 0.0f));
+    *dt = select(*dt, v_min(*dt, f / -beta), on & VMASK(beta < 0.0f));
 }
 
-/* The largest t' >= t such that the ray stays in the box [lo, hi] (contracted space)
- * over [t, t'] within the projective region of the contraction it is in at t; t when
- * the point at t is outside. Inside |x|_inf <= 1, c = x; outside, with a the axis of
- * |x|_inf = sg * x_a = m, c_b = x_b / m and sg * c_a = 2 - 1/m: every face is linear in
- * t' there. */
-inline float ngp_box_exit(float3 o, float3 d3, float t, float3 lo3, float3 hi3)
+/* The faces of a box [lo_b, hi_b] on axis b (p_b, d_b: the point at t and the direction):
+ * the box and the inner cube |x|_inf <= 1 where `inner`; elsewhere (`other`: outside the
+ * cube, b not the axis of |x|_inf) the region's planes and the box's, linear in t' there. */
+inline void v_axis_faces(vfloat pb, vfloat db, vfloat lo, vfloat hi, vfloat ms, vfloat dm,
+                         vint inner, vint other, vfloat *dt, vint *inside)
 {
-    const float3 p3 = o + t * d3;
-    const float p[3] = {p3.x, p3.y, p3.z}, d[3] = {d3.x, d3.y, d3.z};
-    const float lo[3] = {lo3.x, lo3.y, lo3.z}, hi[3] = {hi3.x, hi3.y, hi3.z};
-    const float ax = ngp_absf(p[0]), ay = ngp_absf(p[1]), az = ngp_absf(p[2]);
-    const float m = ngp_maxf(ngp_maxf(ax, ay), az);
-    const int a = ax == m ? 0 : (ay == m ? 1 : 2);
-    const float sg = p[a] > 0.0f ? 1.0f : -1.0f;
-    const float ms = sg * p[a], dm = sg * d[a];
-    const bool inner = m <= 1.0f;
-    float dt = INFINITY;
-    bool inside = true;
-    for (int b = 0; b < 3; ++b) {
-        ngp_face(p[b] - lo[b], d[b], inner, &dt, &inside);
-        ngp_face(hi[b] - p[b], -d[b], inner, &dt, &inside);
-        ngp_face(1.0f - p[b], -d[b], inner, &dt, &inside);
-        ngp_face(1.0f + p[b], d[b], inner, &dt, &inside);
-        const bool other = !inner && a != b;
-        ngp_face(ms * REGION_SCALE - p[b], dm * REGION_SCALE - d[b], other, &dt, &inside);
-        ngp_face(ms * REGION_SCALE + p[b], dm * REGION_SCALE + d[b], other, &dt, &inside);
-        ngp_face(p[b] - lo[b] * ms, d[b] - lo[b] * dm, other, &dt, &inside);
-        ngp_face(hi[b] * ms - p[b], hi[b] * dm - d[b], other, &dt, &inside);
-    }
-    if (!inner) {
-        ngp_face(ms - 1.0f, dm, true, &dt, &inside);
-        const float lo_a = sg > 0.0f ? lo[a] : -hi[a], hi_a = sg > 0.0f ? hi[a] : -lo[a];
-        if (lo_a < 2.0f) ngp_face(ms - 1.0f / (2.0f - lo_a), dm, true, &dt, &inside);
-        else inside = false;
-        if (hi_a < 2.0f) ngp_face(1.0f / (2.0f - hi_a) - ms, -dm, true, &dt, &inside);
-    }
-    return inside ? t + dt : t;
+    v_face(pb - lo, db, inner, dt, inside);
+    v_face(hi - pb, -db, inner, dt, inside);
+    v_face(1.0f - pb, -db, inner, dt, inside);
+    v_face(1.0f + pb, db, inner, dt, inside);
+    v_face(ms * REGION_SCALE - pb, dm * REGION_SCALE - db, other, dt, inside);
+    v_face(ms * REGION_SCALE + pb, dm * REGION_SCALE + db, other, dt, inside);
+    v_face(pb - lo * ms, db - lo * dm, other, dt, inside);
+    v_face(hi * ms - pb, hi * dm - db, other, dt, inside);
 }
 
-/* The largest distance T_j of lane j (in `walking`) to which its ray stays in both boxes
- * of its skip from t_j: the empty mip cell shrunk by BOX_MARGIN and, where `cube`, the
- * cube inscribed in G's ball about u (ngp_box_exit). */
+/* Per lane, the largest t' >= t such that the ray o + t' d stays in the box [lo, hi]
+ * (contracted space) over [t, t'] within the projective region of the contraction it is
+ * in at t; t where the point at t is outside. Inside |x|_inf <= 1, c = x; outside, with a
+ * the axis of |x|_inf = sg * x_a = m, c_b = x_b / m and sg * c_a = 2 - 1/m: every face
+ * is linear in t' there. All lanes at once, each computed as render_ref computes it. */
+inline vfloat v_box_exit(float3 o, vpoint d, vfloat t, vpoint lo, vpoint hi)
+{
+    const vfloat px = o.x + t * d.x, py = o.y + t * d.y, pz = o.z + t * d.z;
+    const vfloat ax = v_abs(px), ay = v_abs(py), az = v_abs(pz);
+    const vfloat m = v_max(v_max(ax, ay), az);
+    const vint on_x = VMASK(ax == m), on_y = ~on_x & VMASK(ay == m), on_z = ~on_x & ~on_y;
+    const vfloat pa = select(select(pz, py, on_y), px, on_x);
+    const vfloat da = select(select(d.z, d.y, on_y), d.x, on_x);
+    const vfloat sg = select((vfloat)(-1.0f), (vfloat)(1.0f), VMASK(pa > 0.0f));
+    const vfloat ms = sg * pa, dm = sg * da;
+    const vint inner = VMASK(m <= 1.0f), outer = ~inner;
+    vfloat dt = (vfloat)(INFINITY);
+    vint inside = (vint)(-1);
+    v_axis_faces(px, d.x, lo.x, hi.x, ms, dm, inner, outer & ~on_x, &dt, &inside);
+    v_axis_faces(py, d.y, lo.y, hi.y, ms, dm, inner, outer & ~on_y, &dt, &inside);
+    v_axis_faces(pz, d.z, lo.z, hi.z, ms, dm, inner, outer & ~on_z, &dt, &inside);
+    const vfloat lo_axis = select(select(lo.z, lo.y, on_y), lo.x, on_x);
+    const vfloat hi_axis = select(select(hi.z, hi.y, on_y), hi.x, on_x);
+    const vint up = VMASK(sg > 0.0f);
+    const vfloat lo_a = select(-hi_axis, lo_axis, up), hi_a = select(-lo_axis, hi_axis, up);
+    v_face(ms - 1.0f, dm, outer, &dt, &inside);
+    const vint lo_open = VMASK(lo_a < 2.0f);
+    v_face(ms - 1.0f / (2.0f - lo_a), dm, outer & lo_open, &dt, &inside);
+    inside = inside & ~(outer & ~lo_open);
+    v_face(1.0f / (2.0f - hi_a) - ms, -dm, outer & VMASK(hi_a < 2.0f), &dt, &inside);
+    return select(t, t + dt, inside);
+}
+
+/* The largest distance T of each lane in `walking` (tk elsewhere) to which its ray stays
+ * in both boxes of its skip from tk: the empty mip cell shrunk by BOX_MARGIN and, where
+ * `cube`, the cube inscribed in G's ball about u (v_box_exit). */
 inline vfloat v_boxes_exit(const v_rays *r, vfloat tk, vint walking, vcell cell, vint res,
                            vpoint u, vint cube, vfloat half_side)
 {
     const vfloat size = 4.0f / VF(res);           /* a cell, in contracted units */
     const vfloat margin = size * BOX_MARGIN;
-    vfloat T = tk;
-    FOR_LANES(j) {
-        if (!LANE_I(walking, j)) continue;
-        const float sz = LANE_F(size, j), mg = LANE_F(margin, j), hf = LANE_F(half_side, j);
-        const float3 i = (float3)((float)LANE_I(cell.x, j), (float)LANE_I(cell.y, j),
-                                  (float)LANE_I(cell.z, j));
-        const float3 dj = (float3)(LANE_F(r->d.x, j), LANE_F(r->d.y, j), LANE_F(r->d.z, j));
-        const float3 cj = (float3)(LANE_F(u.x, j), LANE_F(u.y, j), LANE_F(u.z, j)) * 4.0f
-                          - 2.0f;
-        const float tj = LANE_F(tk, j);
-        float Tj = ngp_box_exit(r->o, dj, tj, i * sz - 2.0f + mg, (i + 1.0f) * sz - 2.0f - mg);
-        if (LANE_I(cube, j)) Tj = ngp_maxf(Tj, ngp_box_exit(r->o, dj, tj, cj - hf, cj + hf));
-        LANE_F(T, j) = Tj;
+    const vfloat ix = VF(cell.x), iy = VF(cell.y), iz = VF(cell.z);
+    const vpoint lo = {ix * size - 2.0f + margin, iy * size - 2.0f + margin,
+                       iz * size - 2.0f + margin};
+    const vpoint hi = {(ix + 1.0f) * size - 2.0f - margin, (iy + 1.0f) * size - 2.0f - margin,
+                       (iz + 1.0f) * size - 2.0f - margin};
+    vfloat T = v_box_exit(r->o, r->d, tk, lo, hi);
+    const vint in_cube = walking & cube;
+    if (any(in_cube)) {
+        const vfloat cx = u.x * 4.0f - 2.0f, cy = u.y * 4.0f - 2.0f, cz = u.z * 4.0f - 2.0f;
+        const vpoint c_lo = {cx - half_side, cy - half_side, cz - half_side};
+        const vpoint c_hi = {cx + half_side, cy + half_side, cz + half_side};
+        T = select(T, v_max(T, v_box_exit(r->o, r->d, tk, c_lo, c_hi)), in_cube);
     }
-    return T;
+    return select(tk, T, walking);
 }
 
 /* Unbounded skip of the lanes in `empty`, whose exit code is `code` (no memory read but
