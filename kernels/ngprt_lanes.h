@@ -97,6 +97,8 @@ typedef struct { vint x, y, z; } vcell;
 /* n + 1 in the lanes of mask, n elsewhere. */
 inline vint v_inc(vint n, vint mask) { return select(n, n + 1, mask); }
 
+/* min / max / abs as selects: PoCL lowers fmin / fmax / fabs to library calls (~10 ns
+ * each on the CPU); these give identical results for the finite values used here. */
 inline vfloat v_min(vfloat a, vfloat b) { return select(b, a, VMASK(a < b)); }
 inline vfloat v_max(vfloat a, vfloat b) { return select(b, a, VMASK(a > b)); }
 inline vfloat v_abs(vfloat a) { return select(a, -a, VMASK(a < 0.0f)); }

@@ -2,9 +2,6 @@
  *
  * exp and 1/x: the library's (a few ulps, as numpy's) in the exact build, the device's
  * native ones in the fast build (-D FAST_MATH=1, device.FAST_OPTIONS).
- * min / max / abs: PoCL lowers fmin / fmax / fabs to library calls that cost ~10 ns each
- * on the CPU; these comparisons compile to a few instructions and give identical results
- * for the finite values used here (NaN never reaches them).
  */
 #ifndef CLRENDER_NGPRT_MATH_H
 #define CLRENDER_NGPRT_MATH_H
@@ -18,8 +15,4 @@
 #define NGP_EXP(x) exp(x)
 #define NGP_RECIP(x) (1.0f / (x))
 #endif
-
-inline float ngp_maxf(float a, float b) { return a > b ? a : b; }
-inline float ngp_minf(float a, float b) { return a < b ? a : b; }
-inline float ngp_absf(float a) { return a < 0.0f ? -a : a; }
 #endif

@@ -16,7 +16,6 @@
 #ifndef CLRENDER_NGPRT_SKIP_H
 #define CLRENDER_NGPRT_SKIP_H
 #pragma OPENCL FP_CONTRACT OFF
-#include "ngprt_math.h"
 #include "ngprt_space.h"
 
 #if !defined(K_BACKOFF) || !defined(K_PAST_END) || !defined(BOX_MARGIN) || \
