@@ -165,13 +165,12 @@ def load_reference(folder: Path) -> dict:
 
 
 def run(folder: Path, out: Path, repeats: int) -> list[dict]:
-    sizes = tuple(SIZES)
     devices = []
     for index, device in enumerate(list_devices()):
         info = device_info(device)
         name = f"{info['platform']} / {info['device']}"
         print(f"[{index}] {name}", flush=True)
-        rows, exit_note = check_device_apart(index, folder, repeats, sizes)
+        rows, exit_note = check_device_apart(index, folder, repeats, SIZES)
         devices.append({"index": index, "name": name, "type": info["type"], "info": info,
                         "rows": rows, "exit": exit_note})
     meta = {"reference": json.loads((folder / "reference.json").read_text()),

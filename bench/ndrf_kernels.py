@@ -36,6 +36,7 @@ from bench.ngprt_kernels import TRAINED_SIZES
 from bench.sizes import at_size, parse_size, trained_test_set
 from clrender import methods
 from clrender.atomic import write_atomic
+from clrender.cliopts import whole_number
 from clrender.metrics import summarize_ms
 from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.random_model import random_ndrf_model
@@ -202,7 +203,7 @@ def main(argv=None) -> int:
     p.add_argument("--data", default=None, type=Path, help="its dataset (test cameras)")
     p.add_argument("--frames", nargs="+", default=list(TRAINED_SIZES),
                    help="frame sizes WxH besides the test size (trained model)")
-    p.add_argument("--downscale", type=int, default=None, metavar="N",
+    p.add_argument("--downscale", type=whole_number(), default=None, metavar="N",
                    help="with --data: read its images_N/ (default: the model's training one)")
     p.add_argument("--teacher", default=None, help="a baked NGP-RT model to time beside it")
     p.add_argument("--repeats", type=int, default=5)

@@ -41,6 +41,7 @@ import numpy as np
 from bench.limits import deferred_bound, march_bound, measure_limits
 from bench.sizes import at_size, parse_size, trained_test_set
 from clrender.atomic import write_atomic
+from clrender.cliopts import whole_number
 from clrender.device import get_runtime
 from clrender.metrics import summarize_ms
 from clrender.ngprt.baked import load_baked
@@ -326,7 +327,7 @@ def main(argv=None) -> int:
                         f"(default {' '.join(TRAINED_SIZES)})")
     p.add_argument("--views", type=int, default=None,
                    help="with --model: the first N test cameras (default all)")
-    p.add_argument("--downscale", type=int, default=None, metavar="N",
+    p.add_argument("--downscale", type=whole_number(), default=None, metavar="N",
                    help="with --data: read its images_N/ (default: the model's training one)")
     args = p.parse_args(argv)
     if (args.model is None) != (args.data is None):

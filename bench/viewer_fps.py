@@ -94,7 +94,8 @@ def measure(model, size: int, seconds: float) -> dict:
     alone_fps, kernel_ms = renderer_fps(model, camera, min(seconds, 5.0))
     return {"size": f"{camera.width}x{camera.height}", "page_fps": page_fps,
             "page_frames": len(images), "moves_per_s": moves / wall,
-            "sent_fps": sent / wall, "sent_frames": sent, "renderer_fps": alone_fps, "kernel_ms": kernel_ms, "last_stats": stats}
+            "sent_fps": sent / wall, "sent_frames": sent, "renderer_fps": alone_fps,
+            "kernel_ms": kernel_ms, "last_stats": stats}
 
 
 def main(argv=None) -> int:

@@ -314,7 +314,6 @@ def _features(run):
     return int(state["step"]), {k: v for k, v in state["model"].items()}
 
 
-
 def _train_stopped_at(monkeypatch, step: int, *args, **kwargs) -> None:
     """NDRF's train(*args, **kwargs) interrupted right after its checkpoint at ``step``."""
     from clrender.ndrf import train as ndrf_train
@@ -331,6 +330,7 @@ def _train_stopped_at(monkeypatch, step: int, *args, **kwargs) -> None:
     with pytest.raises(KeyboardInterrupt):
         ndrf_train.train(*args, **kwargs)
     monkeypatch.setattr(RunFolder, "save_checkpoint", save)
+
 
 def test_train_resume_and_bake(tmp_path, small_run_inputs, monkeypatch):
     from clrender.ndrf import train as ndrf_train
