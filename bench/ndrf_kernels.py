@@ -16,10 +16,11 @@ student's speed-up is the teacher's median frame time over the student's (raster
 Bounds, from this device's rates measured here (:mod:`bench.limits`): conv0 and conv1 from
 their FLOPs (:func:`counters`: conv0 as the kernel computes it, factored by linearity into
 per-vertex projections and a view table) at the measured FLOP rate; conv0's gathers (its
-projected vertex rows and table rows, one random read each) at the random-gather rate
-measured on a table of the projections' size; the rasteriser is reported per triangle and per covered
-pixel-layer (it has no single bound: setup per triangle, edge tests per box pixel, one
-atomic per covered pixel and layer). Writes ``<out>/ndrf_kernels[_<model>].{json,md}``.
+projected vertex rows and table row pairs, one random read each) at the random-gather rate
+measured on a table of the projections' size; the rasteriser is reported per triangle and
+per covered pixel-layer (it has no single bound: setup per triangle, binning per
+(triangle, tile) pair, edge tests per tile row a pair spans). Writes
+``<out>/ndrf_kernels[_<model>].{json,md}``.
 Never asserts.
 """
 from __future__ import annotations
@@ -75,9 +76,10 @@ def counters(model, out: dict) -> dict:
 
     conv0 (kernels/ndrf_shade.cl, factored; fast build): for each pixel it computes (read by
     a covered pixel) and tap, 3 projected vertex rows of H channels blended per mesh hit at
-    the tap's input pixel (2 FLOPs a channel) and 3 view-table lerps (3 FLOPs a channel)
-    for an input pixel inside the image; gathers: those rows (3 per hit, 2 per lerp; one
-    random read each, its H floats contiguous). conv1: covered pixels x H x S^2 x 3 x 2.
+    the tap's input pixel (2 FLOPs a channel) and 3 view-table lerps (value + fraction x
+    step, accumulated: 3 FLOPs a channel) for an input pixel inside the image; gathers:
+    those rows (3 per hit, one value-and-step row pair per lerp; one random read each, its
+    floats contiguous). conv1: covered pixels x H x S^2 x 3 x 2.
     """
     cfg = model.config
     S, H, r = cfg.kernel_size, cfg.hidden, cfg.kernel_size - 1
@@ -90,7 +92,7 @@ def counters(model, out: dict) -> dict:
     return {"covered": int(coverage.sum()), "conv0_pixels": int(needed.sum()),
             "conv0_flops": float(tap_hits * 3 * H * 2 + tap_inside * 3 * H * 3),
             "conv1_flops": float(coverage.sum()) * H * S * S * 3 * 2,
-            "gathers": float(tap_hits * 3 + tap_inside * 6),
+            "gathers": float(tap_hits * 3 + tap_inside * 3),
             "hit_layers": int(out["n_hits"].sum())}
 
 

@@ -1,8 +1,9 @@
 /* NDRF visibility-buffer rasteriser (docs/ndrf.md "Hits"), binned into screen tiles; mirrors
  * the Embree first hits of clrender/ndrf/hits.py, which the tests hold it to:
  *   ndrf_raster_clear  the tiles' triangle counts = 0.
- *   ndrf_raster_setup  per triangle (all K meshes, faces concatenated): to camera space, edge
- *                      normals, screen bounds (tri_geo, tri_box).
+ *   ndrf_raster_setup  per triangle (all K meshes, faces concatenated; 16 a work-item, one
+ *                      a vector lane): to camera space, edge normals, screen bounds
+ *                      (tri_geo, tri_box).
  *   ndrf_raster_count  per triangle: counted in every TS x TS tile its edges do not exclude
  *                      (tile_overlaps).
  *   ndrf_raster_scan   the counts to each tile's first slot in the triangle list.
@@ -32,10 +33,12 @@
  * Depth test: per pixel and mesh the least camera-space depth V / (n . r), the smaller
  * triangle id on a tie (whatever order the tile's list holds its triangles in).
  *
- * Buffers: tri_geo (faces, 16) float: c (9), n (3), V, 3 unused; tri_box (faces, 8) int:
- * x0, y0, x1, y1 inclusive pixel bounds (x0 > x1: covers nothing), mesh, face within it,
- * tie-ownership bits of the 3 edges, 0; tile_count (n_tiles) int, then each tile's cursor
- * (its first slot, advanced by ndrf_raster_bin); tile_start (n_tiles + 1) int; list
+ * Buffers: tri_geo (faces, 16) 32-bit words, all the tile pass reads of a triangle in one
+ * 64-byte record: c (9), n (3), V (floats), then its rows y0 | y1 << 16, its face within
+ * its mesh, its mesh | the tie-ownership bits of its 3 edges << 8 (ints); tri_box
+ * (faces, 4) int: x0, y0, x1, y1 inclusive pixel bounds (x0 > x1: covers nothing);
+ * tile_count (n_tiles) int, then each tile's cursor (its first slot, advanced by
+ * ndrf_raster_bin); tile_start (n_tiles + 1) int; list
  * (capacity) int; out tri (K, H, W) int (-1: miss), bary (K, H, W) float2, depth (K, H, W)
  * float (inf on a miss). ray_ab: the pixel rays' a (tiles_x * TS floats; NaN past the
  * image's last column, so nothing covers them), then b (height floats) of
@@ -58,41 +61,37 @@
 /* Where ray_ab's b values start: after the a of every column of whole tiles. */
 #define RAY_B(width) (((width) + TS - 1) / TS * TS)
 
-/* A triangle in camera space, ready to test pixels. */
-typedef struct {
-    float c[9];            /* edge normals: sign(V) (v1 x v2), (v2 x v0), (v0 x v1) */
-    float n[3];            /* sign(V) (v1 - v0) x (v2 - v0) */
-    float V;               /* |det(v0, v1, v2)| = |n . v0| */
-    int x0, y0, x1, y1;    /* inclusive pixel bounds, clamped to the image */
-    int mesh, id;          /* mesh k and the face index within it */
-} Tri;
+/* Triangle setup, LANES triangles a work-item, one per float16 lane (a scalar work-item
+ * per triangle runs ~4x slower on PoCL: calls and gathers do not vectorise across
+ * work-items). Points and vectors are 3 float16 (x, y, z), one triangle a lane; every
+ * lane computes with the float32 operations of a scalar version, in the same order. */
+#define LANES 16
 
-/* p (world) to camera space: R^T (p - origin), R row-major at cam[4..12], into v[0..2]. */
-inline void to_camera(__global const float *cam, __global const float *p, float *v)
+/* p (world) to camera space: R^T (p - origin), R row-major at cam[4..12]. */
+inline void to_camera(__global const float *cam, const float16 *p, float16 *v)
 {
-    const float qx = p[0] - cam[13], qy = p[1] - cam[14], qz = p[2] - cam[15];
+    const float16 qx = p[0] - cam[13], qy = p[1] - cam[14], qz = p[2] - cam[15];
     v[0] = cam[4] * qx + cam[7] * qy + cam[10] * qz;
     v[1] = cam[5] * qx + cam[8] * qy + cam[11] * qz;
     v[2] = cam[6] * qx + cam[9] * qy + cam[12] * qz;
 }
 
-/* out = s (a x b) for 3-float a, b. Scalar arrays throughout this file, not float3: float3
- * values built in these helpers crash the --uninitialized plugin of Oclgrind 21.10. */
-inline void cross_scaled(const float *a, const float *b, float s, float *out)
+/* out = s (a x b). Arrays of float16, not float3 vectors: float3 values built in helpers
+ * crash the --uninitialized plugin of Oclgrind 21.10. */
+inline void cross_scaled(const float16 *a, const float16 *b, float16 s, float16 *out)
 {
     out[0] = s * (a[1] * b[2] - a[2] * b[1]);
     out[1] = s * (a[2] * b[0] - a[0] * b[2]);
     out[2] = s * (a[0] * b[1] - a[1] * b[0]);
 }
 
-/* The pixel column (or row) range [lo, hi] whose centres +0.5 fall in [a, b], widened by
+/* The pixel column (or row) ranges [lo, hi] whose centres +0.5 fall in [a, b], widened by
  * 0.05 pixels (a projected vertex is placed within ~1e-3 pixels: a few float32 roundings of
  * coordinates below 2^14; the edge functions decide). */
-inline int2 pixel_range(float a, float b, int n)
+inline void pixel_range(float16 a, float16 b, int n, int16 *lo, int16 *hi)
 {
-    const float lo = fmin(fmax(ceil(a - 0.5f - 0.05f), 0.0f), (float)n);
-    const float hi = fmax(fmin(floor(b - 0.5f + 0.05f), (float)(n - 1)), -1.0f);
-    return (int2)((int)lo, (int)hi);
+    *lo = convert_int16(fmin(fmax(ceil(a - 0.5f - 0.05f), 0.0f), (float)n));
+    *hi = convert_int16(fmax(fmin(floor(b - 0.5f + 0.05f), (float)(n - 1)), -1.0f));
 }
 
 /* s (v_a x v_b) of camera-space vertices va, vb (global indices ia, ib) into out, computed as
@@ -100,71 +99,25 @@ inline int2 pixel_range(float a, float b, int n)
  * arithmetic, but without the cancellation of two long vectors (a small triangle far from
  * the eye), and, since both triangles of a shared edge compute the same product, still
  * exactly negated between them. */
-inline void edge_normal(const float *va, const float *vb, int ia, int ib, float s, float *out)
+inline void edge_normal(const float16 *va, const float16 *vb, int16 ia, int16 ib, float16 s,
+                        float16 *out)
 {
-    const int swap = !(ia < ib);
-    float lo[3], d[3];
+    const int16 swap = ia >= ib;
+    float16 lo[3], d[3];
     for (int j = 0; j < 3; ++j) {
-        lo[j] = swap ? vb[j] : va[j];
-        d[j] = (swap ? va[j] : vb[j]) - lo[j];
+        lo[j] = select(va[j], vb[j], swap);
+        d[j] = select(vb[j], va[j], swap) - lo[j];
     }
-    cross_scaled(lo, d, swap ? -s : s, out);
+    cross_scaled(lo, d, select(s, -s, swap), out);
 }
 
-/* Triangle g of the concatenated faces: its mesh, camera-space edge normals and inclusive
- * pixel bounds. Returns 0 when it cannot cover a pixel (degenerate, behind the camera, off
- * screen, or between pixel centres); t is then filled all the same (straight-line code),
- * its values meaningless. */
-inline int tri_setup(int g, __global const float *cam, int width, int height,
-                     __global const int *face_start, __global const int *faces,
-                     __global const int *face_ids, __global const float *vertices, Tri *t)
+/* Whether a pixel centre exactly on edge c (E = 0) counts as covered: c lexicographically
+ * positive (the tie rule); 1 or 0 a lane. (Masks become 0 / 1 by select(): Oclgrind 21.10
+ * evaluates -mask and mask & 1 of vector comparisons as 255.) */
+inline int16 edge_owns_ties(const float16 *c)
 {
-    int k = 0;
-    for (int j = 1; j < K; ++j) k += g >= face_start[j];
-    t->mesh = k;
-    t->id = face_ids[g];
-    const int i0 = faces[3 * g], i1 = faces[3 * g + 1], i2 = faces[3 * g + 2];
-    float v0[3], v1[3], v2[3], e1[3], e2[3], n[3];
-    to_camera(cam, vertices + 3 * i0, v0);
-    to_camera(cam, vertices + 3 * i1, v1);
-    to_camera(cam, vertices + 3 * i2, v2);
-    for (int j = 0; j < 3; ++j) {
-        e1[j] = v1[j] - v0[j];
-        e2[j] = v2[j] - v0[j];
-    }
-    cross_scaled(e1, e2, 1.0f, n);
-    const float V = n[0] * v0[0] + n[1] * v0[1] + n[2] * v0[2];
-    const float s = V > 0.0f ? 1.0f : -1.0f;
-    edge_normal(v1, v2, i1, i2, s, t->c);
-    edge_normal(v2, v0, i2, i0, s, t->c + 3);
-    edge_normal(v0, v1, i0, i1, s, t->c + 6);
-    for (int j = 0; j < 3; ++j) t->n[j] = s * n[j];
-    t->V = s * V;
-    /* Camera looks down -z: depth -z. A vertex at or behind the camera plane: the covered
-     * rays may lie anywhere on screen, bound by the image. */
-    const float eps = 1e-7f;
-    const int near = -v0[2] <= eps || -v1[2] <= eps || -v2[2] <= eps;
-    const float ax = v0[0] / -v0[2], bx = v1[0] / -v1[2], cx = v2[0] / -v2[2];
-    const float ay = v0[1] / -v0[2], by = v1[1] / -v1[2], cy = v2[1] / -v2[2];
-    /* pixel x + 0.5 = cx + fx a, y + 0.5 = cy - fy b (kernels/camera.h) */
-    const float sx0 = cam[2] + cam[0] * fmin(ax, fmin(bx, cx));
-    const float sx1 = cam[2] + cam[0] * fmax(ax, fmax(bx, cx));
-    const float sy0 = cam[3] - cam[1] * fmax(ay, fmax(by, cy));
-    const float sy1 = cam[3] - cam[1] * fmin(ay, fmin(by, cy));
-    const int2 xr = pixel_range(sx0, sx1, width), yr = pixel_range(sy0, sy1, height);
-    t->x0 = near ? 0 : xr.x;
-    t->x1 = near ? width - 1 : xr.y;
-    t->y0 = near ? 0 : yr.x;
-    t->y1 = near ? height - 1 : yr.y;
-    const int facing = V != 0.0f && !(v0[2] >= 0.0f && v1[2] >= 0.0f && v2[2] >= 0.0f);
-    return facing && t->x0 <= t->x1 && t->y0 <= t->y1;
-}
-
-/* Whether a pixel centre exactly on edge c (3 floats, E = 0) counts as covered: c
- * lexicographically positive (the tie rule). */
-inline int edge_owns_ties(const float *c)
-{
-    return c[0] > 0.0f || (c[0] == 0.0f && (c[1] > 0.0f || (c[1] == 0.0f && c[2] > 0.0f)));
+    return select((int16)(0), (int16)(1), (c[0] > 0.0f) | ((c[0] == 0.0f)
+                  & ((c[1] > 0.0f) | ((c[1] == 0.0f) & (c[2] > 0.0f)))));
 }
 
 /* Whether some pixel centre of the tile of columns [px0, px1], rows [py0, py1] may have all
@@ -194,32 +147,92 @@ __kernel void ndrf_raster_clear(const int n_tiles, __global int *tile_count)
     if (i < n_tiles) tile_count[i] = 0;
 }
 
+/* Triangles g0 .. g0 + LANES - 1 of the concatenated faces: camera-space edge normals, n and
+ * V, their mesh and face within it, inclusive pixel bounds and tie bits into tri_geo and
+ * tri_box. A triangle that cannot cover a pixel (degenerate, behind the camera, off screen,
+ * or between pixel centres) gets bounds x0 > x1. */
 __kernel void ndrf_raster_setup(__global const float *cam, const int width, const int height,
                                 const int n_faces, __global const int *face_start,
                                 __global const int *faces, __global const int *face_ids,
                                 __global const float *vertices, __global float *tri_geo,
                                 __global int *tri_box)
 {
-    const int g = (int)get_global_id(0);
-    if (g >= n_faces) return;
-    Tri t;
-    const int ok = tri_setup(g, cam, width, height, face_start, faces, face_ids, vertices, &t);
-    __global float *geo = tri_geo + 16 * g;
-    for (int j = 0; j < 9; ++j) geo[j] = t.c[j];
-    for (int j = 0; j < 3; ++j) geo[9 + j] = t.n[j];
-    geo[12] = t.V;
-    geo[13] = geo[14] = geo[15] = 0.0f;
-    const int own = edge_owns_ties(t.c) | edge_owns_ties(t.c + 3) << 1
-                    | edge_owns_ties(t.c + 6) << 2;
-    __global int *box = tri_box + 8 * g;
-    box[0] = ok ? t.x0 : 1;             /* x0 > x1: covers nothing */
-    box[1] = t.y0;
-    box[2] = ok ? t.x1 : 0;
-    box[3] = t.y1;
-    box[4] = t.mesh;
-    box[5] = t.id;
-    box[6] = own;
-    box[7] = 0;
+    const int g0 = (int)get_global_id(0) * LANES;
+    if (g0 >= n_faces) return;
+    /* Gather the lanes' vertex indices and world positions (past n_faces: the last face). */
+    int index[3][LANES], id[LANES];
+    float world[3][3][LANES];
+    for (int l = 0; l < LANES; ++l) {
+        const int g = min(g0 + l, n_faces - 1);
+        id[l] = face_ids[g];
+        for (int j = 0; j < 3; ++j) {
+            index[j][l] = faces[3 * g + j];
+            for (int e = 0; e < 3; ++e) world[j][e][l] = vertices[3 * index[j][l] + e];
+        }
+    }
+    const int16 g = g0 + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    int16 mesh = (int16)(0), i[3];
+    for (int j = 1; j < K; ++j) mesh += select((int16)(0), (int16)(1), g >= face_start[j]);
+    float16 v[3][3], p[3], e1[3], e2[3], n[3], c[3][3];
+    for (int j = 0; j < 3; ++j) {
+        i[j] = vload16(0, index[j]);
+        for (int e = 0; e < 3; ++e) p[e] = vload16(0, world[j][e]);
+        to_camera(cam, p, v[j]);
+    }
+    for (int e = 0; e < 3; ++e) {
+        e1[e] = v[1][e] - v[0][e];
+        e2[e] = v[2][e] - v[0][e];
+    }
+    cross_scaled(e1, e2, (float16)(1.0f), n);
+    const float16 V = n[0] * v[0][0] + n[1] * v[0][1] + n[2] * v[0][2];
+    const float16 s = select((float16)(-1.0f), (float16)(1.0f), V > 0.0f);
+    edge_normal(v[1], v[2], i[1], i[2], s, c[0]);
+    edge_normal(v[2], v[0], i[2], i[0], s, c[1]);
+    edge_normal(v[0], v[1], i[0], i[1], s, c[2]);
+    /* Camera looks down -z: depth -z. A vertex at or behind the camera plane: the covered
+     * rays may lie anywhere on screen, bound by the image. */
+    const float eps = 1e-7f;
+    const int16 near = (-v[0][2] <= eps) | (-v[1][2] <= eps) | (-v[2][2] <= eps);
+    float16 sx[3], sy[3];
+    for (int j = 0; j < 3; ++j) {
+        sx[j] = v[j][0] / -v[j][2];
+        sy[j] = v[j][1] / -v[j][2];
+    }
+    /* pixel x + 0.5 = cx + fx a, y + 0.5 = cy - fy b (kernels/camera.h) */
+    int16 x0, x1, y0, y1;
+    pixel_range(cam[2] + cam[0] * fmin(sx[0], fmin(sx[1], sx[2])),
+                cam[2] + cam[0] * fmax(sx[0], fmax(sx[1], sx[2])), width, &x0, &x1);
+    pixel_range(cam[3] - cam[1] * fmax(sy[0], fmax(sy[1], sy[2])),
+                cam[3] - cam[1] * fmin(sy[0], fmin(sy[1], sy[2])), height, &y0, &y1);
+    x0 = select(x0, (int16)(0), near);
+    x1 = select(x1, (int16)(width - 1), near);
+    y0 = select(y0, (int16)(0), near);
+    y1 = select(y1, (int16)(height - 1), near);
+    const int16 facing = (V != 0.0f) & ((v[0][2] < 0.0f) | (v[1][2] < 0.0f) | (v[2][2] < 0.0f));
+    const int16 ok = facing & (x0 <= x1) & (y0 <= y1);
+    /* The records, lane by lane through private memory. */
+    float rec[13][LANES];
+    int words[3][LANES], box[4][LANES];
+    for (int j = 0; j < 3; ++j)
+        for (int e = 0; e < 3; ++e) vstore16(c[j][e], 0, rec[3 * j + e]);
+    for (int j = 0; j < 3; ++j) vstore16(s * n[j], 0, rec[9 + j]);
+    vstore16(s * V, 0, rec[12]);
+    vstore16(y0 | y1 << 16, 0, words[0]);
+    vstore16(mesh | (edge_owns_ties(c[0]) | edge_owns_ties(c[1]) << 1
+                     | edge_owns_ties(c[2]) << 2) << 8, 0, words[2]);
+    vstore16(select((int16)(1), x0, ok), 0, box[0]);    /* x0 > x1: covers nothing */
+    vstore16(y0, 0, box[1]);
+    vstore16(select((int16)(0), x1, ok), 0, box[2]);
+    vstore16(y1, 0, box[3]);
+    for (int l = 0; l < LANES && g0 + l < n_faces; ++l) {
+        __global float *geo = tri_geo + 16 * (g0 + l);
+        __global int *w = (__global int *)geo;
+        for (int j = 0; j < 13; ++j) geo[j] = rec[j][l];
+        w[13] = words[0][l];
+        w[14] = id[l];
+        w[15] = words[2][l];
+        for (int j = 0; j < 4; ++j) tri_box[4 * (g0 + l) + j] = box[j][l];
+    }
 }
 
 /* The tiles of triangle g that its edges do not exclude, counted (atomic) or each given
@@ -229,7 +242,7 @@ inline void for_each_tile(int g, int width, __global const float *ray_ab,
                           volatile __global int *counter, const int capacity,
                           __global int *list)
 {
-    const int4 b = vload4(0, tri_box + 8 * g);
+    const int4 b = vload4(g, tri_box);
     if (b.x > b.z) return;
     float c[9];
     for (int j = 0; j < 9; ++j) c[j] = tri_geo[16 * g + j];
@@ -285,8 +298,8 @@ __kernel void ndrf_raster_bin(const int width, const int n_faces, __global const
  * v = E_2 / (n . r) (ratios of the tetrahedra (eye, v_i, v_j)), at camera-space depth
  * V / (n . r), i.e. at distance V / (n . r) |(a, b, -1)| along the unit ray. */
 __kernel void ndrf_raster_tile(const int width, const int height, __global const float *ray_ab,
-                               __global const float *tri_geo, __global const int *tri_box,
-                               __global const int *tile_start, __global const int *list,
+                               __global const float *tri_geo, __global const int *tile_start,
+                               __global const int *list,
                                __global int *tri, __global float *bary, __global float *depth)
 {
     const int tx = (int)get_global_id(0), gy = (int)get_global_id(1);
@@ -307,16 +320,17 @@ __kernel void ndrf_raster_tile(const int width, const int height, __global const
     const int end = tile_start[tile + 1];
     for (int i = tile_start[tile]; i < end; ++i) {
         const int g = list[i];
-        const int8 box = vload8(0, tri_box + 8 * g);
-        const int r0 = max(box.s1 - y0, 0), r1 = min(box.s3 - y0, TROWS - 1);
-        if (r0 > r1) continue;
         __global const float *geo = tri_geo + 16 * g;
+        __global const int *words = (__global const int *)geo;
+        const int rows = words[13], meta = words[15];
+        const int r0 = max((rows & 0xffff) - y0, 0), r1 = min((rows >> 16) - y0, TROWS - 1);
+        if (r0 > r1) continue;
         const float c00 = geo[0], c01 = geo[1], c02 = geo[2], c10 = geo[3], c11 = geo[4],
                     c12 = geo[5], c20 = geo[6], c21 = geo[7], c22 = geo[8], n0 = geo[9],
                     n1 = geo[10], n2 = geo[11], V = geo[12];
-        const int16 own0 = (int16)(-(box.s6 & 1)), own1 = (int16)(-((box.s6 >> 1) & 1)),
-                    own2 = (int16)(-((box.s6 >> 2) & 1)), id = (int16)(box.s5);
-        const int k = box.s4;
+        const int16 own0 = (int16)(-((meta >> 8) & 1)), own1 = (int16)(-((meta >> 9) & 1)),
+                    own2 = (int16)(-((meta >> 10) & 1)), id = (int16)(words[14]);
+        const int k = meta & 0xff;
         for (int r = r0; r <= r1; ++r) {
             const float ry = ray_b[y0 + r];
             const float16 e0 = c00 * rx + (c01 * ry - c02), e1 = c10 * rx + (c11 * ry - c12),
@@ -324,7 +338,6 @@ __kernel void ndrf_raster_tile(const int width, const int height, __global const
             const int16 cov = ((e0 > 0.0f) | ((e0 == 0.0f) & own0))
                               & ((e1 > 0.0f) | ((e1 == 0.0f) & own1))
                               & ((e2 > 0.0f) | ((e2 == 0.0f) & own2)) & (en > 0.0f);
-            if (!any(cov)) continue;
             const float16 inv_en = 1.0f / en, dist = V * inv_en;   /* one division */
             const float16 b = best[k][r];
             const int16 better = cov & ((dist < b) | ((dist == b) & (id < best_id[k][r])));

@@ -34,7 +34,8 @@
  * zero-padded to H_STRIDE:
  *   proj (sum V_k, KSIZE*KSIZE, H_STRIDE) per-vertex projections, b0 (H_STRIDE),
  *   w_view (KSIZE*KSIZE, VIEW_C, H_STRIDE) [tap, in, out] (exact build) or the table
- *   (3, KSIZE*KSIZE, VIEW_NODES, H_STRIDE) (fast build),
+ *   (3, VIEW_NODES, KSIZE*KSIZE, 2, H_STRIDE) [component, node, tap, value | step to the
+ *   next node, out] (fast build),
  *   w1 (KSIZE*KSIZE, 3, H_STRIDE) [tap, out, in], b1 (3).
  * Speed: conv0 vectorises across output channels; a work-item prepares the
  * (SEG + PAD) x (ROWS + PAD) input pixels of its block once (hits, ray direction).
@@ -54,6 +55,9 @@
 #endif
 #if C_IN != (FEATURES + 3) * K + 3 + 6 * N_FREQ
 #error "C_IN must be 8K features + 3K positions + 3 + 6 N_FREQ view channels"
+#endif
+#if SEG + KSIZE - 1 > 16
+#error "a conv0 work-item's row of input pixels must fit one 16-lane vector"
 #endif
 #if H_STRIDE < HIDDEN || H_STRIDE % H_VEC != 0
 #error "H_STRIDE must be a multiple of H_VEC no smaller than HIDDEN"
@@ -204,11 +208,11 @@ inline hvec ndrf_relu(hvec x)
 
 /* What conv0 needs of screen pixel (px, py), for the KSIZE x KSIZE taps it feeds:
  * vi[3k + e] the vertices (concatenated numbering) of its hit on mesh k, -1 on a miss or
- * outside the image, vw[3k + e] their barycentric weights (1-u-v, u, v); the view encoding
- * (exact build: the VIEW_C channels) or its table lookups (fast build: node and fraction per
- * direction component), untouched outside the image (*inside = 0). */
-inline void ndrf_conv0_pixel(const Frame *f, const float *inv_f, int px, int py, int *inside,
-                             int *vi, float *vw, float *view, int *node, float *frac)
+ * outside the image, vw[3k + e] their barycentric weights (1-u-v, u, v); exact build: the
+ * view encoding's VIEW_C channels, untouched outside the image (*inside = 0). (The fast
+ * build's view table lookups come a row at a time: ndrf_view_nodes.) */
+inline void ndrf_conv0_pixel(const Frame *f, int px, int py, int *inside, int *vi, float *vw,
+                             float *view)
 {
     *inside = px < f->width && py < f->height;
     for (int e = 0; e < 3 * K; ++e) {
@@ -232,25 +236,33 @@ inline void ndrf_conv0_pixel(const Frame *f, const float *inv_f, int px, int py,
             vw[3 * k + 2] = uv.y;
         }
     }
+#if !FAST_MATH
     float dc[3];
-#if FAST_MATH
-    /* The ray direction of kernels/camera.h with one division where it has five (inv_f:
-     * the reciprocal focal lengths, once a work-item): a few ulp off. */
-    __global const float *cam = f->cam;
-    const float a = ((float)px + 0.5f - cam[2]) * inv_f[0];
-    const float b = -(((float)py + 0.5f - cam[3]) * inv_f[1]);
-    for (int c = 0; c < 3; ++c) dc[c] = cam[4 + 3 * c] * a + cam[5 + 3 * c] * b - cam[6 + 3 * c];
-    const float inv_norm = 1.0f / sqrt(dc[0] * dc[0] + dc[1] * dc[1] + dc[2] * dc[2]);
-    for (int c = 0; c < 3; ++c) {
-        dc[c] = dc[c] * inv_norm;
-        const float u = (dc[c] + 1.0f) * (0.5f * (float)(VIEW_NODES - 1));
-        node[c] = clamp((int)u, 0, VIEW_NODES - 2);
-        frac[c] = u - (float)node[c];
-    }
-#else
     camera_ray_dir_into(f->cam, px, py, dc);
     ndrf_view_encoding(vload3(0, dc), view);
 #endif
+}
+
+/* The fast build's view table lookups of the 16 pixels x0 .. x0 + 15 of row py, one a
+ * lane: node[c] and frac[c] for direction component c. The ray direction of
+ * kernels/camera.h with one division where it has five (inv_f: the reciprocal focal
+ * lengths, once a work-item): a few ulp off. */
+inline void ndrf_view_nodes(__global const float *cam, const float *inv_f, int x0, int py,
+                            int16 *node, float16 *frac)
+{
+    const int16 px = x0 + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    const float16 a = (convert_float16(px) + 0.5f - cam[2]) * inv_f[0];
+    const float b = -(((float)py + 0.5f - cam[3]) * inv_f[1]);
+    float16 dc[3];
+    for (int c = 0; c < 3; ++c) dc[c] = cam[4 + 3 * c] * a + cam[5 + 3 * c] * b - cam[6 + 3 * c];
+    const float16 inv_norm = 1.0f / sqrt(dc[0] * dc[0] + dc[1] * dc[1] + dc[2] * dc[2]);
+    for (int c = 0; c < 3; ++c) {
+        const float16 u = (dc[c] * inv_norm + 1.0f) * (0.5f * (float)(VIEW_NODES - 1));
+        /* Clamped as a float (the same node): Oclgrind 21.10's clamp() of an int16 is
+         * wrong. */
+        node[c] = convert_int16(fmin(fmax(u, 0.0f), (float)(VIEW_NODES - 2)));
+        frac[c] = u - convert_float16(node[c]);
+    }
 }
 
 #define NB (H_STRIDE / H_VEC)
@@ -270,13 +282,11 @@ inline void ndrf_tap(hvec *acc, int t, const int *vi, const float *vw, const flo
     }
 #if FAST_MATH
     for (int c = 0; c < 3; ++c) {
-        __global const float *a = w_view + ((c * TAPS + t) * VIEW_NODES + node[c]) * H_STRIDE;
+        __global const float *a = w_view + (((c * VIEW_NODES + node[c]) * TAPS + t) * 2) * H_STRIDE;
         const float b = frac[c];
         #pragma unroll
-        for (int j = 0; j < NB; ++j) {
-            const hvec lo = vload_h(j, a);
-            acc[j] = acc[j] + (lo + b * (vload_h(j, a + H_STRIDE) - lo));
-        }
+        for (int j = 0; j < NB; ++j)
+            acc[j] = acc[j] + (vload_h(j, a) + b * vload_h(j, a + H_STRIDE));
     }
 #else
     __global const float *w = w_view + t * VIEW_C * H_STRIDE;
@@ -309,11 +319,27 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
     int node[ROWS + PAD][SEG + PAD][3];
     float vw[ROWS + PAD][SEG + PAD][3 * K], frac[ROWS + PAD][SEG + PAD][3];
     float view[ROWS + PAD][SEG + PAD][VIEW_C];
-    const float inv_f[2] = {1.0f / cam[0], 1.0f / cam[1]};
-    for (int r = 0; r < ny; ++r)
+    for (int r = 0; r < ny; ++r) {
         for (int i = 0; i < nx; ++i)
-            ndrf_conv0_pixel(&f, inv_f, x0 + i, y0 + r, &inside[r][i], vi[r][i], vw[r][i],
-                             view[r][i], node[r][i], frac[r][i]);
+            ndrf_conv0_pixel(&f, x0 + i, y0 + r, &inside[r][i], vi[r][i], vw[r][i], view[r][i]);
+#if FAST_MATH
+        const float inv_f[2] = {1.0f / cam[0], 1.0f / cam[1]};
+        int16 n16[3];
+        float16 f16[3];
+        int nodes[3][16];
+        float fracs[3][16];
+        ndrf_view_nodes(cam, inv_f, x0, y0 + r, n16, f16);
+        for (int c = 0; c < 3; ++c) {
+            vstore16(n16[c], 0, nodes[c]);
+            vstore16(f16[c], 0, fracs[c]);
+        }
+        for (int i = 0; i < nx; ++i)
+            for (int c = 0; c < 3; ++c) {
+                node[r][i][c] = nodes[c][i];
+                frac[r][i][c] = fracs[c][i];
+            }
+#endif
+    }
     for (int r = 0; r < ny - PAD; ++r) {
         for (int q = 0; q < nx - PAD; ++q) {
             int needed = 0;

@@ -36,6 +36,7 @@ from .hits import Hits
 F32, I32 = np.float32, np.int32
 TS = 16                     # pixels a side of a tile: one float16 a tile row
 INITIAL_PAIRS = 1 << 16     # (triangle, tile) list slots first allocated; grown on demand
+SETUP_LANES = 16            # triangles a work-item of ndrf_raster_setup (its LANES)
 
 
 def rows_per_item(device: cl.Device) -> int:
@@ -146,7 +147,7 @@ class Rasteriser:
         n = max(self.n_faces, 1)
         check_allocation(rt.device, f"raster triangle setup ({self.n_faces} faces)", 64 * n)
         self._setup = {"tri_geo": cl.Buffer(rt.context, mf.READ_WRITE, 64 * n),
-                       "tri_box": cl.Buffer(rt.context, mf.READ_WRITE, 32 * n)}
+                       "tri_box": cl.Buffer(rt.context, mf.READ_WRITE, 16 * n)}
         self._capacity = 0
         self.binned_pairs = 0        # (triangle, tile) pairs the last frame binned
         self._size = None
@@ -213,9 +214,10 @@ class Rasteriser:
         cl.enqueue_copy(q, b["cam"], camera.packed())
         cl.enqueue_copy(q, b["ray_ab"], pixel_ray_ab(camera))
         n_tiles, faces = np.int32(self._n_tiles), (max(self.n_faces, 1),)
+        setup_items = (-(-faces[0] // SETUP_LANES),)
         events = [
             self._run("ndrf_raster_clear", (int(n_tiles),), n_tiles, b["tile_count"]),
-            self._run("ndrf_raster_setup", faces, b["cam"], w, h, np.int32(self.n_faces),
+            self._run("ndrf_raster_setup", setup_items, b["cam"], w, h, np.int32(self.n_faces),
                       g["face_start"], g["faces"], g["face_ids"], g["vertices"], s["tri_geo"],
                       s["tri_box"]),
             self._run("ndrf_raster_count", faces, w, np.int32(self.n_faces), b["ray_ab"],
@@ -232,7 +234,7 @@ class Rasteriser:
                       s["tri_geo"], s["tri_box"], b["tile_count"], np.int32(self._capacity),
                       tile_list),
             self._run("ndrf_raster_tile", (tiles_x, tiles_y * (TS // self.rows)), w, h,
-                      b["ray_ab"], s["tri_geo"], s["tri_box"], b["tile_start"], tile_list,
+                      b["ray_ab"], s["tri_geo"], b["tile_start"], tile_list,
                       b["tri"], b["bary"], b["depth"])]
         return b, {"ms_raster": sum(event_ms(e) for e in events)}
 

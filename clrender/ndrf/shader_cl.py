@@ -115,11 +115,13 @@ def view_weights(model, defines: dict, exact: bool) -> np.ndarray:
     """conv0's view-channel weights as the kernel's build reads them.
 
     exact: (S*S, VIEW_C, H_STRIDE) float32, the weights of the view encoding's channels.
-    Otherwise the table (3, S*S, VIEW_NODES, H_STRIDE) float32: for direction component c,
-    tap t and node s_n = -1 + 2n / (VIEW_NODES - 1), the sum of the weights of d_c,
-    sin(2^i d_c) and cos(2^i d_c) times those functions of s_n (float64, then rounded):
-    a pixel's view contribution is the sum over c of this 1D function at d_c, which the
-    kernel interpolates linearly (max error ~ h^2 / 8 * |f''|, h = 2 / (VIEW_NODES - 1)).
+    Otherwise the table (3, VIEW_NODES, S*S, 2, H_STRIDE) float32: for direction component
+    c, node s_n = -1 + 2n / (VIEW_NODES - 1) and tap t, the value f(s_n) of the sum of the
+    weights of d_c, sin(2^i d_c) and cos(2^i d_c) times those functions, then the step to
+    the next node f(s_{n+1}) - f(s_n) (0 at the last; float64, then rounded): a pixel's view
+    contribution is the sum over c of this 1D function at d_c, which the kernel interpolates
+    linearly (max error ~ h^2 / 8 * |f''|, h = 2 / (VIEW_NODES - 1)) from one row pair, the
+    taps of a node side by side.
     """
     a, cfg = model.arrays, model.config
     S, C, H, N = cfg.kernel_size, cfg.c_in, cfg.hidden, cfg.n_freq
@@ -129,13 +131,14 @@ def view_weights(model, defines: dict, exact: bool) -> np.ndarray:
         out[..., :H] = w
         return out
     s = np.linspace(-1.0, 1.0, defines["VIEW_NODES"])
-    table = np.zeros((3, S * S, len(s), defines["H_STRIDE"]), F32)
+    table = np.zeros((3, len(s), S * S, 2, defines["H_STRIDE"]), F32)
     for c in range(3):
-        f = s[None, :, None] * w[:, None, c]
+        f = s[:, None, None] * w[None, :, c]
         for i in range(N):
-            f = (f + np.sin(2.0 ** i * s)[None, :, None] * w[:, None, 3 + 6 * i + c]
-                 + np.cos(2.0 ** i * s)[None, :, None] * w[:, None, 6 + 6 * i + c])
-        table[c, ..., :H] = f
+            f = (f + np.sin(2.0 ** i * s)[:, None, None] * w[None, :, 3 + 6 * i + c]
+                 + np.cos(2.0 ** i * s)[:, None, None] * w[None, :, 6 + 6 * i + c])
+        table[c, :, :, 0, :H] = f
+        table[c, :-1, :, 1, :H] = f[1:] - f[:-1]
     return table
 
 
