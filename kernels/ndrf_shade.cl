@@ -379,7 +379,8 @@ inline float ndrf_sum(hvec a)
     return t[0] + t[1];
 }
 
-inline float ndrf_sigmoid(float x)
+/* The three colour channels at once (lane 3 unused): one vector exp instead of three. */
+inline float4 ndrf_sigmoid(float4 x)
 {
     return 1.0f / (1.0f + NDRF_EXP(-x));
 }
@@ -414,7 +415,7 @@ __kernel void ndrf_conv1(FRAME_ARGS, __global const float *hidden, __global cons
             }
         }
     }
-    rgb[3 * p] = ndrf_sigmoid(b1[0] + ndrf_sum(a0));
-    rgb[3 * p + 1] = ndrf_sigmoid(b1[1] + ndrf_sum(a1));
-    rgb[3 * p + 2] = ndrf_sigmoid(b1[2] + ndrf_sum(a2));
+    const float4 c = ndrf_sigmoid((float4)(b1[0] + ndrf_sum(a0), b1[1] + ndrf_sum(a1),
+                                           b1[2] + ndrf_sum(a2), 0.0f));
+    vstore3(c.xyz, p, rgb);
 }
