@@ -365,9 +365,11 @@ __kernel void ndrf_raster_tile(const int width, const int height, __global const
                 vstore16(id, 0, tri + p);
                 vstore16(t, 0, depth + p);
             }
-            if (cols == TS && !any(hit)) {
-                vstore16((float16)(0.0f), 0, bary + 2 * p);
-                vstore16((float16)(0.0f), 0, bary + 2 * p + TS);
+            if (cols == TS) {   /* (u, v) pairs interleaved: two shuffles, two stores */
+                vstore16(shuffle2(u, v, (uint16)(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6,
+                                                 22, 7, 23)), 0, bary + 2 * p);
+                vstore16(shuffle2(u, v, (uint16)(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13,
+                                                 29, 14, 30, 15, 31)), 0, bary + 2 * p + TS);
             } else {
                 float uv[2][TS];
                 vstore16(u, 0, uv[0]);
