@@ -62,7 +62,7 @@
 #define RAY_B(width) (((width) + TS - 1) / TS * TS)
 
 /* Triangle setup, LANES triangles a work-item, one per float16 lane (a scalar work-item
- * per triangle runs ~4x slower on PoCL: calls and gathers do not vectorise across
+ * per triangle ran 2x slower on PoCL: calls and gathers do not vectorise across
  * work-items). Points and vectors are 3 float16 (x, y, z), one triangle a lane; every
  * lane computes with the float32 operations of a scalar version, in the same order. */
 #define LANES 16
@@ -212,14 +212,14 @@ __kernel void ndrf_raster_setup(__global const float *cam, const int width, cons
     const int16 ok = facing & (x0 <= x1) & (y0 <= y1);
     /* The records, lane by lane through private memory. */
     float rec[13][LANES];
-    int words[3][LANES], box[4][LANES];
+    int rows[LANES], meta[LANES], box[4][LANES];
     for (int j = 0; j < 3; ++j)
         for (int e = 0; e < 3; ++e) vstore16(c[j][e], 0, rec[3 * j + e]);
     for (int j = 0; j < 3; ++j) vstore16(s * n[j], 0, rec[9 + j]);
     vstore16(s * V, 0, rec[12]);
-    vstore16(y0 | y1 << 16, 0, words[0]);
+    vstore16(y0 | y1 << 16, 0, rows);      /* height < 2^16 (clrender/ndrf/raster_cl.py) */
     vstore16(mesh | (edge_owns_ties(c[0]) | edge_owns_ties(c[1]) << 1
-                     | edge_owns_ties(c[2]) << 2) << 8, 0, words[2]);
+                     | edge_owns_ties(c[2]) << 2) << 8, 0, meta);
     vstore16(select((int16)(1), x0, ok), 0, box[0]);    /* x0 > x1: covers nothing */
     vstore16(y0, 0, box[1]);
     vstore16(select((int16)(0), x1, ok), 0, box[2]);
@@ -228,9 +228,9 @@ __kernel void ndrf_raster_setup(__global const float *cam, const int width, cons
         __global float *geo = tri_geo + 16 * (g0 + l);
         __global int *w = (__global int *)geo;
         for (int j = 0; j < 13; ++j) geo[j] = rec[j][l];
-        w[13] = words[0][l];
+        w[13] = rows[l];
         w[14] = id[l];
-        w[15] = words[2][l];
+        w[15] = meta[l];
         for (int j = 0; j < 4; ++j) tri_box[4 * (g0 + l) + j] = box[j][l];
     }
 }
@@ -322,8 +322,10 @@ __kernel void ndrf_raster_tile(const int width, const int height, __global const
         const int g = list[i];
         __global const float *geo = tri_geo + 16 * g;
         __global const int *words = (__global const int *)geo;
-        const int rows = words[13], meta = words[15];
-        const int r0 = max((rows & 0xffff) - y0, 0), r1 = min((rows >> 16) - y0, TROWS - 1);
+        const uint rows = (uint)words[13];
+        const int meta = words[15];
+        const int r0 = max((int)(rows & 0xffff) - y0, 0);
+        const int r1 = min((int)(rows >> 16) - y0, TROWS - 1);
         if (r0 > r1) continue;
         const float c00 = geo[0], c01 = geo[1], c02 = geo[2], c10 = geo[3], c11 = geo[4],
                     c12 = geo[5], c20 = geo[6], c21 = geo[7], c22 = geo[8], n0 = geo[9],

@@ -319,11 +319,13 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
     int node[ROWS + PAD][SEG + PAD][3];
     float vw[ROWS + PAD][SEG + PAD][3 * K], frac[ROWS + PAD][SEG + PAD][3];
     float view[ROWS + PAD][SEG + PAD][VIEW_C];
+#if FAST_MATH
+    const float inv_f[2] = {1.0f / cam[0], 1.0f / cam[1]};
+#endif
     for (int r = 0; r < ny; ++r) {
         for (int i = 0; i < nx; ++i)
             ndrf_conv0_pixel(&f, x0 + i, y0 + r, &inside[r][i], vi[r][i], vw[r][i], view[r][i]);
 #if FAST_MATH
-        const float inv_f[2] = {1.0f / cam[0], 1.0f / cam[1]};
         int16 n16[3];
         float16 f16[3];
         int nodes[3][16];

@@ -193,6 +193,10 @@ def test_large_image_renders_and_too_large_is_refused():
                 else "more hit slots than the rasteriser's int32 indices address")
     with pytest.raises(ValueError, match=expected):
         renderer.render(huge)
+    # A triangle's rows are packed in 16 bits: 2^16 rows are refused, whatever the width.
+    tall = Camera.from_fov(0.9, 1, 2 ** 16, look_at([3.0, -2.0, 1.0]))
+    with pytest.raises(ValueError, match="at most 65535 rows"):
+        renderer.render(tall)
 
 
 def test_unknown_hit_source_is_refused():

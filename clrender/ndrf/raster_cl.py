@@ -165,6 +165,9 @@ class Rasteriser:
             if n >= 2 ** 31:
                 raise ValueError(f"{width}x{height} pixels x K={self.K} meshes: more hit slots "
                                  "than the rasteriser's int32 indices address")
+            if height >= 2 ** 16:
+                raise ValueError(f"{width}x{height} pixels: the rasteriser packs a triangle's "
+                                 "rows in 16 bits, so an image has at most 65535 rows")
             n_tiles = -(-width // TS) * -(-height // TS)
             sizes = {"tri": 4 * n, "bary": 8 * n, "depth": 4 * n}
             ctx, mf = self.runtime.context, cl.mem_flags
