@@ -3,9 +3,8 @@
  *   ndrf_raster_clear  the tiles' triangle counts = 0.
  *   ndrf_raster_setup  per triangle (all K meshes, faces concatenated; 16 a work-item, one
  *                      a vector lane): to camera space, edge normals, screen bounds
- *                      (tri_geo, tri_box).
- *   ndrf_raster_count  per triangle: counted in every TS x TS tile its edges do not exclude
- *                      (tile_overlaps).
+ *                      (tri_geo, tri_box); then counted in every TS x TS tile its edges do
+ *                      not exclude (tile_overlaps).
  *   ndrf_raster_scan   the counts to each tile's first slot in the triangle list.
  *   ndrf_raster_bin    per triangle: its index into the list of every tile it overlaps.
  *   ndrf_raster_tile   per tile (TROWS of its rows a work-item): every listed triangle tested
@@ -141,6 +140,24 @@ inline int tile_overlaps(const float *c, __global const float *ray_ab, int width
     return 1;
 }
 
+/* The tiles of triangle g (edge normals c, inclusive pixel box b) that its edges do not
+ * exclude, counted (atomic) or each given the triangle's index in its list (at the tile's
+ * cursor). */
+inline void for_each_tile(int g, const float *c, int4 b, int width,
+                          __global const float *ray_ab, volatile __global int *counter,
+                          const int capacity, __global int *list)
+{
+    if (b.x > b.z) return;
+    const int tiles_x = (width + TS - 1) / TS;
+    for (int ty = b.y / TS; ty <= b.w / TS; ++ty)
+        for (int tx = b.x / TS; tx <= b.z / TS; ++tx)
+            if (tile_overlaps(c, ray_ab, width, max(tx * TS, b.x), max(ty * TS, b.y),
+                              min(tx * TS + TS - 1, b.z), min(ty * TS + TS - 1, b.w))) {
+                const int slot = atomic_inc(counter + ty * tiles_x + tx);
+                if (list && slot < capacity) list[slot] = g;
+            }
+}
+
 __kernel void ndrf_raster_clear(const int n_tiles, __global int *tile_count)
 {
     const int i = (int)get_global_id(0);
@@ -149,13 +166,15 @@ __kernel void ndrf_raster_clear(const int n_tiles, __global int *tile_count)
 
 /* Triangles g0 .. g0 + LANES - 1 of the concatenated faces: camera-space edge normals, n and
  * V, their mesh and face within it, inclusive pixel bounds and tie bits into tri_geo and
- * tri_box. A triangle that cannot cover a pixel (degenerate, behind the camera, off screen,
- * or between pixel centres) gets bounds x0 > x1. */
+ * tri_box, and each counted in its tiles (tile_count). A triangle that cannot cover a pixel
+ * (degenerate, behind the camera, off screen, or between pixel centres) gets bounds
+ * x0 > x1. */
 __kernel void ndrf_raster_setup(__global const float *cam, const int width, const int height,
                                 const int n_faces, __global const int *face_start,
                                 __global const int *faces, __global const int *face_ids,
-                                __global const float *vertices, __global float *tri_geo,
-                                __global int *tri_box)
+                                __global const float *vertices, __global const float *ray_ab,
+                                __global float *tri_geo, __global int *tri_box,
+                                volatile __global int *tile_count)
 {
     const int g0 = (int)get_global_id(0) * LANES;
     if (g0 >= n_faces) return;
@@ -232,36 +251,11 @@ __kernel void ndrf_raster_setup(__global const float *cam, const int width, cons
         w[14] = id[l];
         w[15] = meta[l];
         for (int j = 0; j < 4; ++j) tri_box[4 * (g0 + l) + j] = box[j][l];
+        float cl[9];
+        for (int j = 0; j < 9; ++j) cl[j] = rec[j][l];
+        for_each_tile(g0 + l, cl, (int4)(box[0][l], box[1][l], box[2][l], box[3][l]), width,
+                      ray_ab, tile_count, 0, 0);
     }
-}
-
-/* The tiles of triangle g that its edges do not exclude, counted (atomic) or each given
- * the triangle's index in its list (at the tile's cursor). */
-inline void for_each_tile(int g, int width, __global const float *ray_ab,
-                          __global const float *tri_geo, __global const int *tri_box,
-                          volatile __global int *counter, const int capacity,
-                          __global int *list)
-{
-    const int4 b = vload4(g, tri_box);
-    if (b.x > b.z) return;
-    float c[9];
-    for (int j = 0; j < 9; ++j) c[j] = tri_geo[16 * g + j];
-    const int tiles_x = (width + TS - 1) / TS;
-    for (int ty = b.y / TS; ty <= b.w / TS; ++ty)
-        for (int tx = b.x / TS; tx <= b.z / TS; ++tx)
-            if (tile_overlaps(c, ray_ab, width, max(tx * TS, b.x), max(ty * TS, b.y),
-                              min(tx * TS + TS - 1, b.z), min(ty * TS + TS - 1, b.w))) {
-                const int slot = atomic_inc(counter + ty * tiles_x + tx);
-                if (list && slot < capacity) list[slot] = g;
-            }
-}
-
-__kernel void ndrf_raster_count(const int width, const int n_faces,
-                                __global const float *ray_ab, __global const float *tri_geo,
-                                __global const int *tri_box, volatile __global int *tile_count)
-{
-    const int g = (int)get_global_id(0);
-    if (g < n_faces) for_each_tile(g, width, ray_ab, tri_geo, tri_box, tile_count, 0, 0);
 }
 
 /* One work-item: tile_start = the exclusive prefix sum of tile_count, tile_start[n_tiles]
@@ -286,7 +280,10 @@ __kernel void ndrf_raster_bin(const int width, const int n_faces, __global const
                               __global int *list)
 {
     const int g = (int)get_global_id(0);
-    if (g < n_faces) for_each_tile(g, width, ray_ab, tri_geo, tri_box, cursor, capacity, list);
+    if (g >= n_faces) return;
+    float c[9];
+    for (int j = 0; j < 9; ++j) c[j] = tri_geo[16 * g + j];
+    for_each_tile(g, c, vload4(g, tri_box), width, ray_ab, cursor, capacity, list);
 }
 
 /* Rows [y0, y0 + TROWS) of the tile at column x0: every triangle of its list against the TS

@@ -121,8 +121,8 @@ class Rasteriser:
             Every layout gives the same hits, bit for bit.
     """
 
-    KERNELS = ("ndrf_raster_clear", "ndrf_raster_setup", "ndrf_raster_count", "ndrf_raster_scan",
-               "ndrf_raster_bin", "ndrf_raster_tile")
+    KERNELS = ("ndrf_raster_clear", "ndrf_raster_setup", "ndrf_raster_scan", "ndrf_raster_bin",
+               "ndrf_raster_tile")
 
     def __init__(self, meshes, device=None, rows: int | None = None):
         if hasattr(meshes, "mesh"):
@@ -221,9 +221,7 @@ class Rasteriser:
         events = [
             self._run("ndrf_raster_clear", (int(n_tiles),), n_tiles, b["tile_count"]),
             self._run("ndrf_raster_setup", setup_items, b["cam"], w, h, np.int32(self.n_faces),
-                      g["face_start"], g["faces"], g["face_ids"], g["vertices"], s["tri_geo"],
-                      s["tri_box"]),
-            self._run("ndrf_raster_count", faces, w, np.int32(self.n_faces), b["ray_ab"],
+                      g["face_start"], g["faces"], g["face_ids"], g["vertices"], b["ray_ab"],
                       s["tri_geo"], s["tri_box"], b["tile_count"]),
             self._kernels["ndrf_raster_scan"](q, (1,), (1,), n_tiles, b["tile_count"],
                                               b["tile_start"])]
