@@ -44,16 +44,20 @@
  * kernels/camera.h, computed once a frame on the host with the same float32 operations
  * (clrender/ndrf/raster_cl.py).
  * -D defines (clrender/ndrf/raster_cl.py): K, TS (tile side: 16, the vector width),
- * TROWS (rows of a tile a work-item covers, dividing TS: TS on CPUs, 1 on GPUs).
+ * TROWS (rows of a tile a work-item covers, dividing TS: TS on CPUs, 1 on GPUs), LANES
+ * (triangles a setup work-item: 16, the vector width).
  */
 #include "camera.h"
 #pragma OPENCL FP_CONTRACT OFF
 
-#if !defined(K) || !defined(TS) || !defined(TROWS)
-#error "ndrf_raster.cl needs -D K TS TROWS"
+#if !defined(K) || !defined(TS) || !defined(TROWS) || !defined(LANES)
+#error "ndrf_raster.cl needs -D K TS TROWS LANES"
 #endif
 #if TS != 16 || TS % TROWS != 0
 #error "TS must be 16 (one float16 a tile row) and a multiple of TROWS"
+#endif
+#if LANES != 16
+#error "LANES must be 16 (the setup's triangles, one a float16 lane)"
 #endif
 #define GROUPS (TS / TROWS)
 #define NONE 0x7fffffff
@@ -64,7 +68,6 @@
  * per triangle ran 2x slower on PoCL: calls and gathers do not vectorise across
  * work-items). Points and vectors are 3 float16 (x, y, z), one triangle a lane; every
  * lane computes with the float32 operations of a scalar version, in the same order. */
-#define LANES 16
 
 /* p (world) to camera space: R^T (p - origin), R row-major at cam[4..12]. */
 inline void to_camera(__global const float *cam, const float16 *p, float16 *v)

@@ -282,7 +282,8 @@ inline void ndrf_tap(hvec *acc, int t, const int *vi, const float *vw, const flo
     }
 #if FAST_MATH
     for (int c = 0; c < 3; ++c) {
-        __global const float *a = w_view + (((c * VIEW_NODES + node[c]) * TAPS + t) * 2) * H_STRIDE;
+        __global const float *a =
+            w_view + (((c * VIEW_NODES + node[c]) * TAPS + t) * 2) * H_STRIDE;
         const float b = frac[c];
         #pragma unroll
         for (int j = 0; j < NB; ++j)

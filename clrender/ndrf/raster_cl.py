@@ -36,7 +36,7 @@ from .hits import Hits
 F32, I32 = np.float32, np.int32
 TS = 16                     # pixels a side of a tile: one float16 a tile row
 INITIAL_PAIRS = 1 << 16     # (triangle, tile) list slots first allocated; grown on demand
-SETUP_LANES = 16            # triangles a work-item of ndrf_raster_setup (its LANES)
+SETUP_LANES = 16            # triangles a work-item of ndrf_raster_setup (-D LANES)
 
 
 def rows_per_item(device: cl.Device) -> int:
@@ -132,7 +132,8 @@ class Rasteriser:
         self.rows = rows_per_item(rt.device) if rows is None else int(rows)
         if self.rows < 1 or TS % self.rows:
             raise ValueError(f"rows={rows}: must divide the tile side {TS}")
-        program = rt.program("ndrf_raster.cl", {"K": self.K, "TS": TS, "TROWS": self.rows})
+        program = rt.program("ndrf_raster.cl", {"K": self.K, "TS": TS, "TROWS": self.rows,
+                                                "LANES": SETUP_LANES})
         self._kernels = {n: program.kernel(n) for n in self.KERNELS}
         meshes, orders = zip(*[spatially_ordered(v, f) for v, f in meshes])
         geometry = packed_geometry(meshes)
