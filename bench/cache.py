@@ -122,8 +122,8 @@ class ModelPlan:
 
     Attributes:
         key: the cache key (a hash of ``spec``); ``folder`` its cache folder.
-        options: the method's training options, ``teacher`` left out (``teacher`` is the
-            teacher's own plan, or None).
+        options: the method's training options, its teacher's option left out
+            (``teacher`` is the teacher's own plan, or None).
         fingerprint: :func:`data_fingerprint` of ``data`` read at ``downscale``.
     """
 
@@ -156,9 +156,10 @@ def plan_model(root: Path, data: Path, fingerprint: str, preset: str, method: st
     """The :class:`ModelPlan` of one table row's model (and of its teacher, nested).
 
     Args:
-        method: the row's method; ``options`` its model options. An option ``teacher``
-            (a dict of model options of the method's ``TEACHER`` method) names a teacher,
-            planned (and cached) like any model and handed to the training as a baked file.
+        method: the row's method; ``options`` its model options. The option its
+            ``TEACHER`` declares (a dict of model options of the teacher's method) names a
+            teacher, planned (and cached) like any model and handed to the training as a
+            baked file.
         fingerprint, downscale: :func:`data_fingerprint` of ``data`` read at ``downscale``.
     """
     plugin = methods.get(method)
@@ -167,11 +168,10 @@ def plan_model(root: Path, data: Path, fingerprint: str, preset: str, method: st
                          f"{', '.join(plugin.PRESETS)}")
     options = dict(options)
     teacher = None
-    if "teacher" in options:
-        if plugin.TEACHER is None:
-            raise ValueError(f"method {method!r} takes no teacher")
-        teacher = plan_model(root, data, fingerprint, preset, plugin.TEACHER,
-                             options.pop("teacher"), seed=seed, downscale=downscale)
+    if plugin.TEACHER is not None and plugin.TEACHER.option in options:
+        teacher = plan_model(root, data, fingerprint, preset, plugin.TEACHER.method,
+                             options.pop(plugin.TEACHER.option), seed=seed,
+                             downscale=downscale)
     spec = {**plugin.model_spec(preset, **options), "data": fingerprint, "seed": seed}
     if teacher is not None:
         spec["teacher"] = teacher.key
@@ -216,7 +216,7 @@ def train_into(plan: ModelPlan, folder: Path, teacher_baked: Path | None,
 
     plugin, options = methods.get(plan.method), dict(plan.options)
     if plan.teacher is not None:
-        options["teacher"] = str(teacher_baked)
+        options[plugin.TEACHER.option] = str(teacher_baked)
     resumed = (folder / "run" / "checkpoint.pt").is_file()
     start = time.perf_counter()
     plugin.train(str(plan.data), folder / "run", plan.preset, seed=plan.seed,

@@ -96,10 +96,11 @@ class Session:
         self.address, self.torch_device = address, torch_device
 
     def __enter__(self) -> "Session":
-        try:
-            import ray
-        except ImportError as e:
-            raise ValueError("--executor ray needs Ray: pip install 'clrender[cluster]'") from e
+        from clrender.extras import require
+
+        require("ray", "cluster", "--executor ray")
+        import ray
+
         os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
         # Workers import bench/ (not an installed package): from this checkout locally,
         # from an uploaded copy of it on a cluster.

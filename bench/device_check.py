@@ -3,8 +3,9 @@
     python -m bench.device_check --make-reference .devcheck     # here, with PoCL: models + images
     python -m bench.device_check --reference .devcheck --out results/   # on any machine
 
-``--make-reference`` writes a random NGP-RT model (``cpu`` preset, separate-v, L = 2) and a
-random NDRF model (K = 2) as baked files, and each one's render of an orbit view at 800x800
+``--make-reference`` writes each registered method's example model (its ``example_model``:
+NGP-RT a random ``cpu`` model, separate-v, L = 2; NDRF a random K = 2 model) as baked files,
+and each one's render of an orbit view at 800x800
 and 1920x1080 on the chosen device (``$CLRENDER_DEVICE``, PoCL here) as reference images
 (uint16 in ``reference.npz``, with the device and date in ``reference.json``). The check
 then lists every platform and device, renders the same views of the same files on each,
@@ -14,9 +15,9 @@ warm-up), the PSNR and largest difference against the reference, and writes
 crashes (at a build, a render or its own teardown: pip's PoCL 3.0 aborts at exit on CPUs its
 LLVM does not know) is that device's finding, not the end of the check.
 
-It needs numpy, pyopencl and embreex only (no torch, scipy or scikit-image), so it runs on
-a machine that reaches no package registry with those three as wheels beside the folder
-the first command wrote. Never asserts.
+It needs numpy and pyopencl only (no torch, scipy, scikit-image or embreex), so it runs on a
+machine that reaches no package registry with those two as wheels beside the folder the
+first command wrote. Never asserts.
 """
 from __future__ import annotations
 
@@ -41,26 +42,22 @@ from clrender.renderer import Renderer
 from .sizes import parse_size
 
 SIZES = ((800, 800), (1920, 1080))
-MODELS = ("ngprt", "ndrf")
 
 
 def _camera(width: int, height: int):
     return path_cameras("bounded", "orbit", 8, width, height)[1]
 
 
-def make_models(folder: Path) -> dict:
-    """The two random baked files (deterministic per seed): {method: path}."""
-    from clrender.ndrf.baked import save_baked as save_ndrf
-    from clrender.ndrf.config import NDRFConfig
-    from clrender.ndrf.random_model import random_ndrf_model
-    from clrender.ngprt.baked import save_baked as save_ngprt
-    from clrender.ngprt.config import preset
-    from clrender.ngprt.random_model import random_baked_model
+def checked_methods() -> list[str]:
+    """The registered methods with an ``example_model``."""
+    return [n for n in methods.names() if methods.declared(methods.get(n), "example_model")]
 
+
+def make_models(folder: Path) -> dict:
+    """Every checked method's example model baked into ``folder``: {method: path}."""
     folder.mkdir(parents=True, exist_ok=True)
-    ngprt = random_baked_model(preset("cpu", variant="separate-v", L=2), seed=0)
-    return {"ngprt": save_ngprt(ngprt, folder / "ngprt.npz"),
-            "ndrf": save_ndrf(random_ndrf_model(NDRFConfig(), seed=0), folder / "ndrf.npz")}
+    return {name: methods.get(name).example_model(folder / f"{name}.npz")
+            for name in checked_methods()}
 
 
 def make_reference(folder: Path, device=None) -> None:
@@ -78,7 +75,7 @@ def make_reference(folder: Path, device=None) -> None:
     tmp.replace(folder / "reference.npz")
     write_atomic(folder / "reference.json", json.dumps(
         {"device": where, "date": datetime.datetime.now().isoformat(timespec="seconds"),
-         "sizes": [list(s) for s in SIZES]}, indent=2))
+         "sizes": [list(s) for s in SIZES], "methods": sorted(paths)}, indent=2))
 
 
 def check_device(index: int, folder: Path, reference: dict, repeats: int,
@@ -86,7 +83,7 @@ def check_device(index: int, folder: Path, reference: dict, repeats: int,
     """Rows for device ``index`` of :func:`list_devices`: each method and size, or the error
     (in this process; :func:`check_device_apart` runs it in a process of its own)."""
     rows = []
-    for method in MODELS:
+    for method in _methods_in(reference):
         try:
             renderer = Renderer(methods.load(folder / f"{method}.npz"), device=str(index))
         except Exception as e:          # noqa: BLE001 - a device that cannot build is a finding
@@ -129,16 +126,17 @@ def check_device_apart(index: int, folder: Path, repeats: int, sizes) -> tuple[l
     tail = " ".join(proc.stderr.strip().splitlines()[-2:])[-300:]
     exit_note = f"its process ended with {how} ({tail})"
     if rows is None:
-        rows = [{"method": m, "error": f"no result: {exit_note}"} for m in MODELS]
+        rows = [{"method": m, "error": f"no result: {exit_note}"} for m in checked_methods()]
     return rows, exit_note
 
 
 def markdown(devices: list[dict], meta: dict) -> str:
+    checked = ", ".join(meta["reference"].get("methods", []))
     lines = ["## Device check", "",
              f"Reference images: {meta['reference']['device']} ({meta['reference']['date']}); "
-             f"random `cpu` NGP-RT (separate-v, L = 2) and NDRF (K = 2) models, one orbit view; "
-             f"frame time: median of {meta['repeats']} after a warm-up (NGP-RT: kernel time; "
-             "NDRF: rasteriser + shader kernel time). PSNR against the reference, both "
+             f"each method's example model ({checked}), one "
+             f"orbit view; frame time: median of {meta['repeats']} after a warm-up (each "
+             "method's frame time, its TIME_NOTE). PSNR against the reference, both "
              "quantised to 16 bits (ceiling ~107 dB).", "",
              "| device | type | method | frame | ms | FPS | PSNR vs reference | max abs diff |",
              "|---|---|---|---|---|---|---|---|"]
@@ -157,6 +155,11 @@ def markdown(devices: list[dict], meta: dict) -> str:
         lines += ["", "Devices whose check process did not exit cleanly (rows above as "
                   "written before):", *ended]
     return "\n".join(lines) + "\n"
+
+
+def _methods_in(reference: dict) -> list[str]:
+    """The methods a reference has images of (keys ``<method>_<W>x<H>``)."""
+    return sorted({key.rsplit("_", 1)[0] for key in reference})
 
 
 def load_reference(folder: Path) -> dict:

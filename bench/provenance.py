@@ -9,8 +9,11 @@ import subprocess
 from importlib import metadata
 from pathlib import Path
 
-# Distributions whose versions can change a trained model or its measurement.
-LIBRARIES = ("clrender", "torch", "numpy", "scipy", "embreex", "pyopencl", "ray")
+from clrender import methods
+
+# Distributions whose versions can change any trained model or its measurement (each method
+# adds its own, its LIBRARIES).
+LIBRARIES = ("clrender", "torch", "numpy", "scipy", "pyopencl", "ray")
 
 
 def git_revision() -> str:
@@ -27,9 +30,11 @@ def git_revision() -> str:
 
 
 def versions() -> dict[str, str]:
-    """{distribution: version} of :data:`LIBRARIES` that are installed, plus Python's."""
+    """{distribution: version} of :data:`LIBRARIES` and every method's that are installed,
+    plus Python's."""
     found = {"python": platform.python_version()}
-    for name in LIBRARIES:
+    extra = [lib for n in methods.names() for lib in methods.declared(methods.get(n), "LIBRARIES")]
+    for name in dict.fromkeys([*LIBRARIES, *extra]):
         try:
             found[name] = metadata.version(name)
         except metadata.PackageNotFoundError:

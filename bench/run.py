@@ -80,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
                         f"(default: {' and '.join(train_curve.PRESETS)})")
     p.add_argument("--method", default=None, choices=methods.names(),
                    help=f"{train_curve.KEY}: the method whose curve is measured "
-                        f"(default {methods.DEFAULT})")
+                        f"(default {methods.default()})")
     p.add_argument("--scene", default=None,
                    help="builtin-bounded | builtin-unbounded | a dataset folder (default: the table's)")
     p.add_argument("--downscale", type=int, default=1, metavar="N",
@@ -122,7 +122,7 @@ def main(argv=None) -> int:
             raise ValueError(f"a table takes one --preset, got {', '.join(args.presets)}")
         if not curve and args.method is not None:
             raise ValueError(f"--method is for {train_curve.KEY}; a table names its methods")
-        args.method = args.method or methods.DEFAULT
+        args.method = args.method or methods.default()
         args.preset = None if curve else (args.presets or [None])[0]
         if args.downscale < 1 or (curve and args.downscale != 1):
             raise ValueError(f"--downscale {args.downscale}: expected a whole number >= 1, "

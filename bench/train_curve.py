@@ -66,6 +66,7 @@ class Evaluator:
     started when the hook is made (just before training), pauses meanwhile.
 
     Args:
+        method: the method trained (stamped on each in-memory model, as a loaded one).
         steps: iterations to evaluate after (see :func:`eval_steps`).
         test_set: the :class:`clrender.data.Dataset` test split.
         render_options: the row's render options (``use_G``).
@@ -75,8 +76,8 @@ class Evaluator:
             eval_seconds (bake + render), test_psnr, test_ssim (means over test views).
     """
 
-    def __init__(self, steps, test_set, render_options: dict, device=None):
-        self.steps, self.test_set = set(steps), test_set
+    def __init__(self, method: str, steps, test_set, render_options: dict, device=None):
+        self.method, self.steps, self.test_set = method, set(steps), test_set
         self.render_options, self.device = dict(render_options), device
         self.points, self.train_seconds, self._resumed = [], 0.0, time.perf_counter()
 
@@ -87,7 +88,8 @@ class Evaluator:
 
         now = time.perf_counter()
         self.train_seconds += now - self._resumed
-        result = evaluate(bake(), self.test_set, device=self.device, **self.render_options)
+        model = methods.stamp(bake(), self.method, f"step {step}'s in-memory model")
+        result = evaluate(model, self.test_set, device=self.device, **self.render_options)
         self._resumed = time.perf_counter()
         self.points.append({"step": step, "train_seconds": self.train_seconds,
                             "eval_seconds": self._resumed - now,
@@ -100,7 +102,7 @@ class Evaluator:
 def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: int = 0,
                   device=None, torch_device=None, iterations: int | None = None,
                   n_points: int = N_POINTS, progress: bool = True,
-                  method: str = methods.DEFAULT) -> list[dict]:
+                  method: str | None = None) -> list[dict]:
     """Train the baseline row's model of ``method`` from scratch with ``preset`` and
     evaluate it along the way.
 
@@ -117,23 +119,26 @@ def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: i
     from clrender.evaluate import evaluate
     from clrender.runs import read_log
 
+    method = method or methods.default()
     plugin, row = methods.get(method), baseline_row(method)
     options = dict(row.model)
+    teacher_option = plugin.TEACHER and plugin.TEACHER.option
     n_iter, log_every = plugin.train_steps(preset, iterations)
     steps = eval_steps(n_iter, log_every, n_points)
     spec = {"method": method, **plugin.model_spec(preset, **{k: v for k, v in options.items()
-                                                             if k != "teacher"}),
+                                                             if k != teacher_option}),
             "iterations": n_iter, "data": fingerprint, "seed": seed, "steps": steps}
     test_set, teacher_psnr = load_dataset(data, split="test"), None
-    if "teacher" in options:
-        teacher = cache.ensure_model(root, data, fingerprint, preset, plugin.TEACHER,
-                                     options["teacher"], seed=seed, torch_device=torch_device)
+    if teacher_option in options:
+        teacher = cache.ensure_model(root, data, fingerprint, preset, plugin.TEACHER.method,
+                                     options[teacher_option], seed=seed,
+                                     torch_device=torch_device)
         teacher_psnr = evaluate(teacher.baked, test_set, device=device)["mean"]["psnr"]
-        options["teacher"], spec["teacher"] = str(teacher.baked), teacher.key
+        options[teacher_option], spec["teacher"] = str(teacher.baked), teacher.key
     key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:16]
     run_dir = Path(root) / "curves" / key / "run"
     shutil.rmtree(run_dir, ignore_errors=True)
-    hook = Evaluator(steps, test_set, row.render, device)
+    hook = Evaluator(method, steps, test_set, row.render, device)
     plugin.train(str(data), run_dir, preset, seed=seed, iterations=n_iter,
                  torch_device=torch_device, progress=progress, on_step=hook, **options)
     logged = {rec["step"]: rec["psnr"] for rec in read_log(run_dir)}

@@ -112,6 +112,9 @@ def _cmd_eval(args) -> int:
 
 
 def _cmd_view(args) -> int:
+    from .extras import require
+
+    require("viser", "view", "`clrender view`")
     from .viewer import serve
 
     serve(args.model, data=args.data, host=args.host, port=args.port, device=args.device,
@@ -150,7 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("data", help="dataset folder: Blender transforms_*.json, nerfstudio "
                                 "transforms.json, LLFF poses_bounds.npy or COLMAP sparse/0")
     _add_downscale(s, 1, "default 1; bake and eval reuse it")
-    s.add_argument("--method", default=methods.DEFAULT, choices=methods.names())
+    s.add_argument("--method", default=methods.default(), choices=methods.names())
     s.add_argument("--out", required=True, help="run folder (checkpoints, config, log)")
     s.add_argument("--preset", default=None, choices=methods.all_presets(),
                    help="the method's preset (default: its DEFAULT_PRESET)")
@@ -206,10 +209,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        parser = build_parser()
+    except methods.PluginError as exc:            # a plug-in that breaks every command
+        print(f"clrender: error: {exc}", file=sys.stderr)
+        return 2
+    args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError, methods.PluginError) as exc:
         print(f"clrender {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

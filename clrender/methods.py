@@ -9,7 +9,10 @@ name is the method's name, its value the plug-in module, e.g. in ``pyproject.tom
     ngprt = "clrender.ngprt.method"
 
 so a method may live in another package. A plug-in is checked against :class:`Method` (its
-``Renderer`` against :class:`MethodRenderer`) when it is first loaded.
+``Renderer`` against :class:`MethodRenderer`), hook signatures included, when it is first
+loaded; it declares the contract version it was written for (``CONTRACT``). The method
+`clrender train` trains without ``--method`` is registered the same way, in the group
+``clrender.default_method`` (one entry, its name the method's).
 
 Examples:
     >>> from clrender import methods
@@ -34,8 +37,13 @@ from typing import Any, Callable, ClassVar, Mapping, Protocol
 from . import bakedfile
 
 GROUP = "clrender.methods"
-# The method `clrender train` trains when --method is not given.
-DEFAULT = "ngprt"
+DEFAULT_GROUP = "clrender.default_method"
+# The version of the contract below; a plug-in declares the one it meets (``CONTRACT``).
+CONTRACT = 1
+
+
+class PluginError(TypeError):
+    """A registered plug-in does not meet the contract (the message names it)."""
 
 
 @dataclass(frozen=True)
@@ -100,6 +108,37 @@ class Stat:
     help: str = ""
 
 
+@dataclass(frozen=True)
+class Teacher:
+    """A method trained from another method's baked model.
+
+    Attributes:
+        option: the ``TRAIN_OPTIONS`` name that takes the teacher's baked file (in a bench
+            row: a table of the teacher's model options, planned and cached like any model).
+        method: the teacher's method.
+    """
+
+    option: str
+    method: str
+
+
+@dataclass(frozen=True)
+class PaperSmoke:
+    """A method's steps of ``bench.paper_smoke`` (its `paper` preset's smoke run).
+
+    Attributes:
+        options: the cuts it takes ({name: Option}, flags of the tool; also ``steps``, the
+            training steps, which every method takes).
+        run: ``run(data, work, cuts, phase, render) -> dict``: the steps' results by name;
+            ``cuts`` {option: value}, ``phase(fn, *args)`` runs ``fn`` (module-level,
+            returning a dict) in a child process and adds its seconds and peak memory,
+            ``render(baked)`` renders one view of a baked file in a child.
+    """
+
+    options: Mapping[str, Option]
+    run: Callable
+
+
 class MethodRenderer(Protocol):
     """A method's renderer: built once per model, rendering many views."""
 
@@ -122,20 +161,22 @@ StepHook = Callable[[int, Callable[[], Any]], None]
 
 
 class Method(Protocol):
-    """A method's plug-in module (see :func:`check` for what is verified)."""
+    """A method's plug-in module (see :func:`check` for what is verified; :data:`OPTIONAL`
+    lists what a plug-in may leave out)."""
 
+    CONTRACT: int                    # the version of this contract it meets (CONTRACT)
     FORMAT: str                      # the baked manifest's ``format``
     PRESETS: tuple[str, ...]         # preset names (CLI and bench choices)
     DEFAULT_PRESET: str              # `clrender train`'s preset when none is given
     TRAIN_OPTIONS: Mapping[str, Option]   # keyword options of ``train`` (CLI flags)
-    TEACHER: str | None              # the method of the model option ``teacher``, or None
+    TEACHER: Teacher | None          # which option takes which method's model, or None
     ABLATIONS: Path | None           # folder of the method's table TOMLs (bench), or None
     CURVE_TABLE: str | None          # train-curve: the baseline row of this table, or None
-    LEGACY_RUNS: bool                # run folders whose config.json lacks "method" are its
     Renderer: type[MethodRenderer]
 
     def load_baked(self, path) -> Any:
-        """A validated model with ``.method`` (the entry-point name) and ``.config.scene``."""
+        """A validated model with ``.config.scene`` ("bounded" or "unbounded"); the shell
+        stamps ``.method`` (the entry-point name) on it (:func:`load`)."""
 
     def train(self, data, out, preset: str, *, seed: int = 0, iterations: int | None = None,
               torch_device=None, progress: bool = True, on_step: StepHook | None = None,
@@ -157,6 +198,25 @@ class Method(Protocol):
 
     def add_commands(self, subparsers) -> None:
         """Add the method's own ``clrender`` sub-commands (may add none)."""
+
+
+# Declarations a plug-in may leave out, with the value the shell then assumes:
+# LEGACY_RUNS, run folders whose config.json lacks "method" are its; LIBRARIES, the
+# distributions (beyond the shell's) whose versions can change its models (bench
+# provenance); SOURCES, the files and folders of its training code, whose normalised text
+# keys the model cache (bench/cache.py); example_model(folder), a random model of its
+# default sizes baked into ``folder``, returning the file (bench.device_check, fuzzing);
+# PAPER_SMOKE, its :class:`PaperSmoke`.
+OPTIONAL = {"LEGACY_RUNS": False, "LIBRARIES": (), "SOURCES": (), "example_model": None,
+            "PAPER_SMOKE": None}
+# The keywords (after the named positional arguments) the shell passes to each hook.
+TRAIN_KEYWORDS = ("seed", "iterations", "torch_device", "progress", "on_step", "downscale")
+SCENES = ("bounded", "unbounded")
+
+
+def declared(plugin, name: str):
+    """``plugin``'s declaration ``name`` of :data:`OPTIONAL`, or its default."""
+    return getattr(plugin, name, OPTIONAL[name])
 
 
 def _runtime_types(hint) -> tuple:
@@ -194,10 +254,22 @@ def check(plugin) -> list[str]:
     problems += [f"{h} is not callable" for h in HOOKS if not callable(getattr(plugin, h, None))]
     if problems:
         return problems
+    if plugin.CONTRACT != CONTRACT:
+        problems.append(f"CONTRACT is {plugin.CONTRACT!r}; this clrender's method contract is "
+                        f"version {CONTRACT}")
     if plugin.DEFAULT_PRESET not in plugin.PRESETS:
         problems.append(f"DEFAULT_PRESET {plugin.DEFAULT_PRESET!r} not in PRESETS")
     problems += [f"TRAIN_OPTIONS[{k!r}] is not an Option" for k, v in plugin.TRAIN_OPTIONS.items()
                  if not isinstance(v, Option)]
+    if plugin.TEACHER is not None and plugin.TEACHER.option not in plugin.TRAIN_OPTIONS:
+        problems.append(f"TEACHER.option {plugin.TEACHER.option!r} is not in TRAIN_OPTIONS")
+    if declared(plugin, "example_model") is not None and not callable(plugin.example_model):
+        problems.append("example_model should be callable")
+    if not isinstance(declared(plugin, "PAPER_SMOKE"), (PaperSmoke, type(None))):
+        problems.append("PAPER_SMOKE should be a PaperSmoke")
+    problems += _signature_problems("train", plugin.train, ("data", "out", "preset"),
+                                    (*TRAIN_KEYWORDS, *plugin.TRAIN_OPTIONS))
+    problems += _signature_problems("bake_run", plugin.bake_run, ("run_dir", "out_path"), ())
     r = plugin.Renderer
     problems += [f"Renderer.{a} should be {' or '.join(c.__name__ for c in t)}"
                  for a, t in RENDERER_ATTRIBUTES.items() if not isinstance(getattr(r, a, None), t)]
@@ -207,12 +279,30 @@ def check(plugin) -> list[str]:
                  for k, v in r.RENDER_OPTIONS.items() if not isinstance(v, Option)]
     problems += [f"Renderer.SCALAR_STATS[{k!r}] is not a Stat"
                  for k, v in r.SCALAR_STATS.items() if not isinstance(v, Stat)]
-    params = inspect.signature(r).parameters
-    problems += [f"Renderer() takes no render option {k!r}" for k in r.RENDER_OPTIONS
-                 if k not in params and not any(p.kind is p.VAR_KEYWORD for p in params.values())]
+    problems += _signature_problems("Renderer", r, ("model",),
+                                    ("device", *r.RENDER_OPTIONS))
     if not callable(getattr(r, "render", None)):
         problems.append("Renderer.render is not callable")
+    else:
+        problems += _signature_problems("Renderer.render", r.render, ("self", "camera"),
+                                        ("background", "stats"))
     return problems
+
+
+def _signature_problems(name: str, fn, positional: tuple[str, ...],
+                        keywords: tuple[str, ...]) -> list[str]:
+    """Why ``fn`` cannot be called as the shell calls it: ``positional`` arguments by
+    position, then ``keywords`` all by keyword (empty: it can)."""
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError):
+        return []                       # a builtin without a signature: not checkable
+    try:
+        sig.bind(*positional, **{k: None for k in keywords})
+    except TypeError as e:
+        call = ", ".join([*positional, *(f"{k}=" for k in keywords)])
+        return [f"{name}{sig} cannot be called as {name}({call}): {e}"]
+    return []
 
 
 def _entry_points() -> dict[str, metadata.EntryPoint]:
@@ -251,8 +341,9 @@ def get(name: str) -> ModuleType:
     if _checked.get(name) is not plugin:
         problems = check(plugin)
         if problems:
-            raise TypeError(f"method {name!r} ({eps[name].value}) does not meet the method "
-                            f"contract (clrender.methods.Method): {'; '.join(problems)}")
+            raise PluginError(f"method {name!r} ({eps[name].value}) does not meet the method "
+                              f"contract (clrender.methods.Method, version {CONTRACT}): "
+                              f"{'; '.join(problems)}")
         _checked[name] = plugin
     return plugin
 
@@ -276,8 +367,34 @@ def name_of(plugin) -> str:
 
 
 def load(path):
-    """Load and validate a baked file of any method (its manifest names the format)."""
-    return for_format(bakedfile.peek_format(path), str(path)).load_baked(path)
+    """Load and validate a baked file of any method (its manifest names the format), its
+    ``.method`` stamped with the method's name."""
+    plugin = for_format(bakedfile.peek_format(path), str(path))
+    return stamp(plugin.load_baked(path), name_of(plugin), str(path))
+
+
+def stamp(model, name: str, where: str = "model"):
+    """``model`` with ``.method = name`` (set on frozen dataclasses too), after checking
+    the contract's ``model.config.scene``; returns ``model``."""
+    scene = getattr(getattr(model, "config", None), "scene", None)
+    if scene not in SCENES:
+        raise bakedfile.BakedFormatError(f"{where}: a {name} model's config.scene is "
+                                         f"{scene!r}, expected one of {SCENES}")
+    object.__setattr__(model, "method", name)
+    return model
+
+
+def default() -> str:
+    """The method `clrender train` trains without ``--method``: the one entry of group
+    :data:`DEFAULT_GROUP` (its name), else the only registered method."""
+    chosen = sorted({ep.name for ep in metadata.entry_points(group=DEFAULT_GROUP)})
+    known = names()
+    if not chosen and len(known) == 1:
+        return known[0]
+    if len(chosen) != 1 or chosen[0] not in known:
+        raise RuntimeError(f"entry-point group {DEFAULT_GROUP!r} should name one registered "
+                           f"method ({', '.join(known)}), names {chosen or 'none'}")
+    return chosen[0]
 
 
 def of_model(model) -> ModuleType:
@@ -297,7 +414,7 @@ def of_run(run_dir) -> ModuleType:
     except (json.JSONDecodeError, AttributeError) as e:
         raise ValueError(f"{conf}: not a JSON object ({e})") from e
     if name is None:
-        legacy = [n for n in names() if get(n).LEGACY_RUNS]
+        legacy = [n for n in names() if declared(get(n), "LEGACY_RUNS")]
         if len(legacy) != 1:
             raise ValueError(f"{conf}: no \"method\" and {len(legacy)} methods claim such runs")
         name = legacy[0]

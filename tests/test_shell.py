@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import itertools
 import json
+import subprocess
+import sys
 from types import SimpleNamespace
 
 import imageio.v3 as iio
@@ -13,6 +15,7 @@ import pytest
 
 import clrender
 from clrender import cli, methods
+from clrender.bakedfile import BakedFormatError
 from clrender.data import load_dataset, make_scene
 from clrender.evaluate import evaluate
 from clrender.metrics import psnr
@@ -27,7 +30,8 @@ from clrender.paths import path_cameras
 
 CORNER_SPHERES = [("sphere", 0.75 * np.array(c, float), np.full(3, 0.12))
                   for c in itertools.product((-1, 1), repeat=3)]
-# A small random model of each registered method (a new method adds its own here).
+# A small random model of each of this package's methods (another installed plug-in is
+# checked by the conformance test and its own tests: tests/test_toy_method.py).
 MODELS = ("ndrf", "ngprt")
 
 
@@ -47,8 +51,9 @@ def scene(tmp_path_factory):
                       width=24, height=24)
 
 
-def test_every_registered_method_has_a_test_model():
-    assert sorted(MODELS) == methods.names()
+def test_this_packages_methods_are_registered_with_a_default():
+    assert set(MODELS) <= set(methods.names())
+    assert methods.default() == "ngprt"
 
 
 @pytest.mark.parametrize("name", methods.names())
@@ -63,7 +68,8 @@ def test_method_meets_the_contract(name):
             opt.check(opt_name, opt.default)
         assert opt.help and opt.cli_flag(opt_name).startswith("--")
     assert all(s.fmt.format(0.5) for s in plugin.Renderer.SCALAR_STATS.values())
-    assert plugin.TEACHER is None or plugin.TEACHER in methods.names()
+    assert plugin.TEACHER is None or plugin.TEACHER.method in methods.names()
+    assert plugin.CONTRACT == methods.CONTRACT
     assert plugin.ABLATIONS is None or plugin.ABLATIONS.is_dir()
     n, log_every = plugin.train_steps(plugin.DEFAULT_PRESET)
     assert n >= 1 and log_every >= 1
@@ -78,10 +84,89 @@ def test_registry_formats_presets_and_clear_errors(tmp_path):
                                          + ", ".join(methods.names())):
         methods.get("gsplat")
     problems = methods.check(SimpleNamespace(FORMAT="x", PRESETS=["a"], TEACHER=None))
-    assert problems[:3] == ["PRESETS should be tuple, is list", "DEFAULT_PRESET is missing",
-                            "TRAIN_OPTIONS is missing"]
+    assert problems[:4] == ["CONTRACT is missing", "PRESETS should be tuple, is list",
+                            "DEFAULT_PRESET is missing", "TRAIN_OPTIONS is missing"]
     assert "train is not callable" in problems and "Renderer is missing" in problems
     assert not any(p.startswith(("FORMAT", "TEACHER")) for p in problems)
+
+
+def _plugin_like(base, **changes):
+    """A copy of plug-in module ``base``'s declarations and hooks with ``changes``."""
+    plugin = SimpleNamespace(**{k: getattr(base, k) for k in dir(base) if not k.startswith("__")})
+    for k, v in changes.items():
+        setattr(plugin, k, v)
+    return plugin
+
+
+def test_hook_signatures_and_the_contract_version_are_checked():
+    ngprt = methods.get("ngprt")
+
+    def train(data, out, preset, *, seed=0, iterations=None, torch_device=None, progress=True,
+              on_step=None, variant="separate-v", L=2):           # no downscale
+        raise AssertionError("never called")
+
+    problems = methods.check(_plugin_like(ngprt, train=train))
+    assert len(problems) == 1 and problems[0].startswith("train(data, out, preset, *, seed=0")
+    assert "cannot be called as train(data, out, preset, seed=, " in problems[0]
+    assert "unexpected keyword argument 'downscale'" in problems[0]
+
+    class Renderer(ngprt.Renderer):
+        def __init__(self, model, device=None):               # no use_G
+            raise AssertionError("never called")
+
+        def render(self, camera):                             # no background, stats
+            raise AssertionError("never called")
+
+    problems = methods.check(_plugin_like(ngprt, CONTRACT=0, bake_run=lambda run_dir: None))
+    assert problems[0] == (f"CONTRACT is 0; this clrender's method contract is version "
+                           f"{methods.CONTRACT}")
+    assert problems[1].startswith("bake_run(run_dir) cannot be called as bake_run(run_dir, "
+                                  "out_path)") and len(problems) == 2
+    problems = methods.check(_plugin_like(ngprt, Renderer=Renderer))
+    assert len(problems) == 2
+    assert problems[0].startswith("Renderer(model, device=None) cannot be called as "
+                                  "Renderer(model, device=, use_G=)")
+    assert problems[1].startswith("Renderer.render(self, camera) cannot be called")
+    assert methods.check(_plugin_like(ngprt, train=lambda data, out, preset, **kw: None)) == []
+    teacher = methods.Teacher("mentor", "ngprt")
+    assert methods.check(_plugin_like(methods.get("ndrf"), TEACHER=teacher)) == [
+        "TEACHER.option 'mentor' is not in TRAIN_OPTIONS"]
+
+
+def test_a_plugin_that_breaks_the_contract_is_one_line_from_the_cli(monkeypatch, capsys):
+    broken = _plugin_like(methods.get("ngprt"), CONTRACT=methods.CONTRACT + 1)
+    real = methods._entry_points()
+    ep = SimpleNamespace(name="broken", value="broken.method", load=lambda: broken)
+    monkeypatch.setattr(methods, "_entry_points", lambda: {**real, "broken": ep})
+    assert cli.main(["info"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(
+        "clrender: error: method 'broken' (broken.method) does not meet the method contract")
+    assert "CONTRACT is 2; this clrender's method contract is version 1" in err
+
+
+def test_load_stamps_the_method_and_checks_the_scene(models):
+    model = methods.load(models["ngprt"])
+    assert model.method == "ngprt"
+    bad = SimpleNamespace(config=SimpleNamespace(scene="indoor"))
+    with pytest.raises(BakedFormatError,
+                       match=r"x.npz: a toy model's config.scene is 'indoor', expected one of "):
+        methods.stamp(bad, "toy", "x.npz")
+    assert methods.stamp(SimpleNamespace(config=SimpleNamespace(scene="bounded")), "toy").method \
+        == "toy"
+
+
+@pytest.mark.parametrize("command", [
+    "from clrender import cli; cli.main(['info'])",
+    "import clrender; m = clrender.load(sys.argv[1]); clrender.Renderer(m)",
+    "import clrender; m = clrender.load(sys.argv[2]); clrender.Renderer(m)"])
+def test_info_and_rendering_do_not_import_embree(models, command):
+    """embreex is imported where NDRF casts with Embree (its reference hit path), not by
+    `clrender info`, an NGP-RT model, or NDRF's default raster path."""
+    code = f"import sys; {command}; assert 'embreex' not in sys.modules, 'embreex imported'"
+    proc = subprocess.run([sys.executable, "-c", code, str(models["ngprt"]),
+                           str(models["ndrf"])], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
 
 
 def test_old_run_folders_without_a_method_are_ngprt(tmp_path):

@@ -13,8 +13,6 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
-from embreex import rtcore_scene
-from embreex.mesh_construction import TriangleMesh
 
 from ..camera import Camera, generate_rays
 
@@ -54,6 +52,10 @@ class HitCaster:
     """
 
     def __init__(self, meshes, threads: int | None = None):
+        # Embree is imported where it casts: loading or rasterising an NDRF model needs none.
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+
         self.threads = max(1, threads or os.cpu_count() or 1)
         if hasattr(meshes, "mesh"):
             meshes = [meshes.mesh(k)[:2] for k in range(meshes.config.K)]

@@ -2,19 +2,20 @@
 its own commands: ``clrender ndrf extract`` (duplex meshes from an NGP-RT teacher) and
 ``clrender ndrf init`` (an untrained model on extracted meshes).
 
-Rendering needs numpy, pyopencl and embreex: training and extraction are imported when
-called.
+Rendering needs numpy and pyopencl (embreex for the Embree hit path, imported when it casts):
+training and extraction are imported when called.
 """
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-from ..methods import Option
+from ..methods import CONTRACT, Option, PaperSmoke, Teacher
 from .baked import FORMAT, load_baked
 from .config import PRESETS as _PRESETS
 from .render import Renderer
 
+CONTRACT = CONTRACT         # written for this version of the method contract
 PRESETS = tuple(_PRESETS)
 DEFAULT_PRESET = "cpu"
 TRAIN_OPTIONS = {
@@ -25,14 +26,14 @@ TRAIN_OPTIONS = {
                           choices=(1, 2)),
     "distill": Option(bool, True, "first half of training on teacher renderings"),
 }
-TEACHER = "ngprt"
+TEACHER = Teacher("teacher", "ngprt")
 ABLATIONS = Path(__file__).resolve().parent / "ablations"
 CURVE_TABLE = "ndrf-table3"
-LEGACY_RUNS = False
-
-__all__ = ["FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER", "ABLATIONS",
-           "CURVE_TABLE", "LEGACY_RUNS", "Renderer", "load_baked", "train", "train_steps",
-           "bake_run", "check_model_options", "model_spec", "add_commands"]
+LIBRARIES = ("embreex", "trimesh", "fast-simplification", "scikit-image")
+__all__ = ["CONTRACT", "FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER",
+           "ABLATIONS", "CURVE_TABLE", "LIBRARIES", "PAPER_SMOKE", "Renderer", "load_baked",
+           "train", "train_steps", "bake_run", "check_model_options", "model_spec",
+           "add_commands", "example_model"]
 
 
 def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
@@ -83,6 +84,28 @@ def model_spec(preset: str, **options) -> dict:
     from .train import model_spec as spec
 
     return spec(preset, **options)
+
+
+def example_model(path) -> Path:
+    """A random model (the default config, K = 2, seed 0) baked to ``path``."""
+    from .baked import save_baked
+    from .config import NDRFConfig
+    from .random_model import random_ndrf_model
+
+    return save_baked(random_ndrf_model(NDRFConfig(), seed=0), path)
+
+
+def _paper_smoke(*args) -> dict:
+    from .paper_smoke import run
+
+    return run(*args)
+
+
+PAPER_SMOKE = PaperSmoke(
+    {"distill_views": Option(int, 4, "distillation views (the paper's: 1000)"),
+     "extract_N": Option(int, None, "extraction grid N (default: the paper preset's, 512)",
+                         flag="--extract-N")},
+    _paper_smoke)
 
 
 def _cmd_extract(args) -> int:

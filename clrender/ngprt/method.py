@@ -7,11 +7,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..methods import Option, Stat
+from ..methods import CONTRACT, Option, PaperSmoke, Stat
 from .baked import FORMAT, load_baked
 from .config import PRESETS as _MODEL_PRESETS, VARIANTS
 from .render_cl import Renderer as _CLRenderer
 
+CONTRACT = CONTRACT         # written for this version of the method contract
 PRESETS = tuple(_MODEL_PRESETS)
 DEFAULT_PRESET = "cpu"
 TRAIN_OPTIONS = {
@@ -23,9 +24,10 @@ ABLATIONS = Path(__file__).resolve().parent / "ablations"
 CURVE_TABLE = "table2"
 LEGACY_RUNS = True          # runs written before config.json named the method are NGP-RT's
 
-__all__ = ["FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER", "ABLATIONS",
-           "CURVE_TABLE", "LEGACY_RUNS", "Renderer", "load_baked", "train", "train_steps",
-           "bake_run", "check_model_options", "model_spec", "add_commands"]
+__all__ = ["CONTRACT", "FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER",
+           "ABLATIONS", "CURVE_TABLE", "LEGACY_RUNS", "PAPER_SMOKE", "Renderer", "load_baked",
+           "train", "train_steps", "bake_run", "check_model_options", "model_spec",
+           "add_commands", "example_model"]
 
 
 class Renderer(_CLRenderer):
@@ -105,3 +107,28 @@ def model_spec(preset: str, variant: str = "separate-v", L: int = 2) -> dict:
 
 def add_commands(subparsers) -> None:
     """NGP-RT has no commands of its own."""
+
+
+def example_model(path) -> Path:
+    """A random `cpu`-preset model (separate-v, L = 2, seed 0) baked to ``path``."""
+    from .baked import save_baked
+    from .config import preset
+    from .random_model import random_baked_model
+
+    return save_baked(random_baked_model(preset("cpu", variant="separate-v", L=2), seed=0), path)
+
+
+def _paper_smoke(*args) -> dict:
+    from .paper_smoke import run
+
+    return run(*args)
+
+
+PAPER_SMOKE = PaperSmoke(
+    {"occ_fraction": Option(float, 2.0 ** -12, "share of the occupancy grid's cells "
+                            "re-evaluated per update (no warm-up)"),
+     "cull_rays": Option(int, 1 << 10, "training rays of the bake's visibility culling"),
+     "batch_samples": Option(int, [1 << 14, 1 << 16], "two batch sizes (samples) whose peak "
+                             "memory difference gives the training memory per sample",
+                             nargs=2)},
+    _paper_smoke)

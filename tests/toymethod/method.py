@@ -20,9 +20,10 @@ import torch
 from clrender import bakedfile
 from clrender.camera import generate_rays
 from clrender.device import event_ms, get_runtime
-from clrender.methods import Option, Stat
+from clrender.methods import CONTRACT, Option, Stat
 from clrender.runs import RunFolder, pick_device
 
+CONTRACT = CONTRACT
 FORMAT, VERSION = "clrender-toy", 1
 PRESETS = ("tiny",)
 DEFAULT_PRESET = "tiny"
@@ -31,7 +32,6 @@ TRAIN_OPTIONS = {"radius": Option(float, 0.6, "sphere radius (scene units)")}
 TEACHER = None
 ABLATIONS = Path(__file__).resolve().parent / "ablations"
 CURVE_TABLE = "toy-table"
-LEGACY_RUNS = False
 KERNEL = Path(__file__).resolve().parent / "toy.cl"
 F32 = np.float32
 
@@ -48,7 +48,6 @@ class ToyModel:
 
     config: ToyConfig
     colour: np.ndarray
-    method = "toy"
 
 
 def render_reference(model: ToyModel, origins, dirs, background, gain: float = 1.0):
@@ -175,6 +174,11 @@ def check_model_options(options: dict) -> None:
 
 def model_spec(preset: str, radius: float = 0.6) -> dict:
     return {"model": {"radius": radius}, "iterations": ITERATIONS[preset]}
+
+
+def example_model(path) -> Path:
+    """A mid-grey sphere of the default radius, baked to ``path``."""
+    return save_baked(ToyModel(ToyConfig(), np.full(3, 0.5, F32)), path)
 
 
 def _cmd_colour(args) -> int:
