@@ -1,7 +1,8 @@
 """Cached scenes and trained/baked models for the benchmark harness, safe for many writers.
 
 Models are keyed by a hash of everything that determines them (the method's model and
-training config, data fingerprint, seed, teacher), so tables that share a row configuration
+training config, the code that trains it (bench/fingerprint.py), data fingerprint, seed,
+teacher), so tables that share a row configuration
 share a model (table2's L=4 row is table3's Separate-Att (V) row and table4's L=4 rows; every
 NDRF row of a scene shares its NGP-RT teacher).
 
@@ -28,6 +29,7 @@ from pathlib import Path
 from filelock import FileLock
 
 from bench import provenance
+from bench.fingerprint import code_fingerprint
 from clrender import methods
 from clrender.atomic import remove_leftovers, write_atomic
 
@@ -172,7 +174,8 @@ def plan_model(root: Path, data: Path, fingerprint: str, preset: str, method: st
         teacher = plan_model(root, data, fingerprint, preset, plugin.TEACHER.method,
                              options.pop(plugin.TEACHER.option), seed=seed,
                              downscale=downscale)
-    spec = {**plugin.model_spec(preset, **options), "data": fingerprint, "seed": seed}
+    spec = {**plugin.model_spec(preset, **options), "code": code_fingerprint(method),
+            "data": fingerprint, "seed": seed}
     if teacher is not None:
         spec["teacher"] = teacher.key
     key = _model_key(spec)

@@ -27,6 +27,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from bench import ablation, cache, cluster, provenance, report, seeds, train_curve
+from bench.fingerprint import code_fingerprint
 from clrender import methods
 from clrender.cliopts import whole_number
 
@@ -63,6 +64,7 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict,
             results.append(seeds.aggregate(per_seed, seed_list))
     cam = test_set.cameras[0]
     meta = {**meta, "resolution": f"{cam.width}x{cam.height}",
+            "code": {m: code_fingerprint(m) for m in sorted({r.method for r in table.rows})},
             "cache": {"root": str(args.cache), "models": used}}
     return report.write_table(args.out, table, results, meta)
 

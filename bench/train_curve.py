@@ -26,6 +26,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from bench import ablation, cache
+from bench.fingerprint import code_fingerprint
 from clrender import methods
 from clrender.atomic import write_atomic
 
@@ -127,7 +128,8 @@ def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: i
     steps = eval_steps(n_iter, log_every, n_points)
     spec = {"method": method, **plugin.model_spec(preset, **{k: v for k, v in options.items()
                                                              if k != teacher_option}),
-            "iterations": n_iter, "data": fingerprint, "seed": seed, "steps": steps}
+            "code": code_fingerprint(method), "iterations": n_iter, "data": fingerprint,
+            "seed": seed, "steps": steps}
     test_set, teacher_psnr = load_dataset(data, split="test"), None
     if teacher_option in options:
         teacher = cache.ensure_model(root, data, fingerprint, preset, plugin.TEACHER.method,

@@ -23,9 +23,16 @@ TEACHER = None
 ABLATIONS = Path(__file__).resolve().parent / "ablations"
 CURVE_TABLE = "table2"
 LEGACY_RUNS = True          # runs written before config.json named the method are NGP-RT's
+_HERE, _PACKAGE = Path(__file__).resolve().parent, Path(__file__).resolve().parent.parent
+# What trains and bakes a model (bench's cache key): model, torch ops, encoding, space,
+# training, baking, the baked format, the data loaders and the run folder.
+SOURCES = (*(_HERE / f for f in ("config.py", "model.py", "torch_ops.py", "encoding.py",
+                                 "space.py", "train.py", "bake.py", "baked.py")),
+           _PACKAGE / "data", _PACKAGE / "runs.py", _PACKAGE / "camera.py")
 
 __all__ = ["CONTRACT", "FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER",
-           "ABLATIONS", "CURVE_TABLE", "LEGACY_RUNS", "PAPER_SMOKE", "Renderer", "load_baked",
+           "ABLATIONS", "CURVE_TABLE", "LEGACY_RUNS", "SOURCES", "PAPER_SMOKE", "Renderer",
+           "load_baked",
            "train", "train_steps", "bake_run", "check_model_options", "model_spec",
            "add_commands", "example_model"]
 
