@@ -10,6 +10,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 F32 = np.float32
+# The camera record's floats (Camera.packed(); its layout: kernels/camera.h).
+CAM_FLOATS = 16
+CAM_BYTES = CAM_FLOATS * 4
 
 
 @dataclass(frozen=True)
@@ -64,8 +67,9 @@ class Camera:
                               max(1, round(self.height * factor)))
 
     def packed(self) -> np.ndarray:
-        """(16,) float32 [fx, fy, cx, cy, R (row-major 3x3), origin (3), pad] for kernels."""
-        out = np.zeros(16, dtype=F32)
+        """(CAM_FLOATS,) float32 [fx, fy, cx, cy, R (row-major 3x3), origin (3)] for kernels
+        (``kernels/camera.h``)."""
+        out = np.zeros(CAM_FLOATS, dtype=F32)
         out[:4] = (self.fx, self.fy, self.cx, self.cy)
         out[4:13] = self.c2w[:3, :3].reshape(-1)
         out[13:16] = self.c2w[:3, 3]

@@ -69,13 +69,14 @@
  * work-items). Points and vectors are 3 float16 (x, y, z), one triangle a lane; every
  * lane computes with the float32 operations of a scalar version, in the same order. */
 
-/* p (world) to camera space: R^T (p - origin), R row-major at cam[4..12]. */
+/* p (world) to camera space: R^T (p - origin), R row-major at cam[CAM_R..]. */
 inline void to_camera(__global const float *cam, const float16 *p, float16 *v)
 {
-    const float16 qx = p[0] - cam[13], qy = p[1] - cam[14], qz = p[2] - cam[15];
-    v[0] = cam[4] * qx + cam[7] * qy + cam[10] * qz;
-    v[1] = cam[5] * qx + cam[8] * qy + cam[11] * qz;
-    v[2] = cam[6] * qx + cam[9] * qy + cam[12] * qz;
+    const float16 qx = p[0] - cam[CAM_O + 0], qy = p[1] - cam[CAM_O + 1],
+                  qz = p[2] - cam[CAM_O + 2];
+    v[0] = cam[CAM_R + 0] * qx + cam[CAM_R + 3] * qy + cam[CAM_R + 6] * qz;
+    v[1] = cam[CAM_R + 1] * qx + cam[CAM_R + 4] * qy + cam[CAM_R + 7] * qz;
+    v[2] = cam[CAM_R + 2] * qx + cam[CAM_R + 5] * qy + cam[CAM_R + 8] * qz;
 }
 
 /* out = s (a x b). Arrays of float16, not float3 vectors: float3 values built in helpers
@@ -222,10 +223,10 @@ __kernel void ndrf_raster_setup(__global const float *cam, const int width, cons
     }
     /* pixel x + 0.5 = cx + fx a, y + 0.5 = cy - fy b (kernels/camera.h) */
     int16 x0, x1, y0, y1;
-    pixel_range(cam[2] + cam[0] * fmin(sx[0], fmin(sx[1], sx[2])),
-                cam[2] + cam[0] * fmax(sx[0], fmax(sx[1], sx[2])), width, &x0, &x1);
-    pixel_range(cam[3] - cam[1] * fmax(sy[0], fmax(sy[1], sy[2])),
-                cam[3] - cam[1] * fmin(sy[0], fmin(sy[1], sy[2])), height, &y0, &y1);
+    pixel_range(cam[CAM_CX] + cam[CAM_FX] * fmin(sx[0], fmin(sx[1], sx[2])),
+                cam[CAM_CX] + cam[CAM_FX] * fmax(sx[0], fmax(sx[1], sx[2])), width, &x0, &x1);
+    pixel_range(cam[CAM_CY] - cam[CAM_FY] * fmax(sy[0], fmax(sy[1], sy[2])),
+                cam[CAM_CY] - cam[CAM_FY] * fmin(sy[0], fmin(sy[1], sy[2])), height, &y0, &y1);
     x0 = select(x0, (int16)(0), near);
     x1 = select(x1, (int16)(width - 1), near);
     y0 = select(y0, (int16)(0), near);

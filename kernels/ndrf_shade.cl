@@ -39,8 +39,8 @@
  *   w1 (KSIZE*KSIZE, 3, H_STRIDE) [tap, out, in], b1 (3).
  * Speed: conv0 vectorises across output channels; a work-item prepares the
  * (SEG + PAD) x (ROWS + PAD) input pixels of its block once (hits, ray direction).
- * Plain a * b + c: mad()/fma() are several times slower on PoCL (DESIGN.md, performance
- * notes).
+ * Plain a * b + c: mad()/fma() are several times slower on PoCL (docs/performance.md,
+ * "PoCL facts the kernels rely on").
  */
 #include "camera.h"
 #pragma OPENCL FP_CONTRACT OFF
@@ -251,10 +251,11 @@ inline void ndrf_view_nodes(__global const float *cam, const float *inv_f, int x
                             int16 *node, float16 *frac)
 {
     const int16 px = x0 + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    const float16 a = (convert_float16(px) + 0.5f - cam[2]) * inv_f[0];
-    const float b = -(((float)py + 0.5f - cam[3]) * inv_f[1]);
+    const float16 a = (convert_float16(px) + 0.5f - cam[CAM_CX]) * inv_f[0];
+    const float b = -(((float)py + 0.5f - cam[CAM_CY]) * inv_f[1]);
     float16 dc[3];
-    for (int c = 0; c < 3; ++c) dc[c] = cam[4 + 3 * c] * a + cam[5 + 3 * c] * b - cam[6 + 3 * c];
+    for (int c = 0; c < 3; ++c)
+        dc[c] = cam[CAM_R + 3 * c] * a + cam[CAM_R + 1 + 3 * c] * b - cam[CAM_R + 2 + 3 * c];
     const float16 inv_norm = 1.0f / sqrt(dc[0] * dc[0] + dc[1] * dc[1] + dc[2] * dc[2]);
     for (int c = 0; c < 3; ++c) {
         const float16 u = (dc[c] * inv_norm + 1.0f) * (0.5f * (float)(VIEW_NODES - 1));
@@ -321,7 +322,7 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
     float vw[ROWS + PAD][SEG + PAD][3 * K], frac[ROWS + PAD][SEG + PAD][3];
     float view[ROWS + PAD][SEG + PAD][VIEW_C];
 #if FAST_MATH
-    const float inv_f[2] = {1.0f / cam[0], 1.0f / cam[1]};
+    const float inv_f[2] = {1.0f / cam[CAM_FX], 1.0f / cam[CAM_FY]};
 #endif
     for (int r = 0; r < ny; ++r) {
         for (int i = 0; i < nx; ++i)

@@ -8,7 +8,8 @@
  * (-D DEFERRED_VEC = 1, 2, 4, 8 or 16), so the 5.8 k multiply-adds per pixel run as
  * SIMD on CPU devices without relying on the driver to vectorise across work-items;
  * the weights are read once per work-item and broadcast. Plain a * b + c: mad()/fma()
- * are several times slower on PoCL (DESIGN.md, performance notes); the fast build
+ * are several times slower on PoCL (docs/performance.md, "PoCL facts the kernels rely
+ * on"); the fast build
  * (-cl-mad-enable) may contract them itself. A work-item whose pixels all have opacity 0
  * (background) writes the background and skips the MLP: rgb * 0 + bg * 1 is bg exactly.
  *

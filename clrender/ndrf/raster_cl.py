@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from ..camera import CAM_BYTES
 from ..device import (check_allocation, device_type_name, event_ms, get_runtime, padded,
                       work_group_size)
 from .hits import Hits
@@ -175,7 +176,7 @@ class Rasteriser:
             for name, nbytes in sizes.items():
                 check_allocation(self.runtime.device, f"raster buffer '{name}' for "
                                  f"{width}x{height} pixels, K={self.K}", nbytes)
-            self._bufs = {"cam": cl.Buffer(ctx, mf.READ_ONLY, 16 * 4),
+            self._bufs = {"cam": cl.Buffer(ctx, mf.READ_ONLY, CAM_BYTES),
                           "ray_ab": cl.Buffer(ctx, mf.READ_ONLY,
                                               4 * (-(-width // TS) * TS + height)),
                           "tile_count": cl.Buffer(ctx, mf.READ_WRITE, 4 * n_tiles),

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from ..camera import CAM_BYTES
 from ..device import (check_allocation, device_type_name, event_ms, get_runtime, padded,
                       work_group_size)
 from .baked import validate
@@ -213,7 +214,7 @@ class Shader:
             r = d["KSIZE"] - 1
             self._band = self.band_rows(width, height)
             hidden_floats = (self._band + r) * (width + r) * d["H_STRIDE"]
-            self._bufs = {"cam": cl.Buffer(ctx, mf.READ_ONLY, 16 * 4)}
+            self._bufs = {"cam": cl.Buffer(ctx, mf.READ_ONLY, CAM_BYTES)}
             self._bufs.update(self._allocate(width, height, {"hidden": hidden_floats * 4,
                                                              "rgb": n * 12}))
             self._zero_padding(width, top_rows=True)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from ..camera import CAM_BYTES
 from ..device import event_ms, get_runtime, padded, work_group_size
 from .config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM, VARIANT_CODES,
                      kernel_constants)
@@ -226,7 +227,7 @@ class Renderer:
         n = camera.width * camera.height
         if getattr(self, "_frame_n", None) != n:
             ctx, mf = self.runtime.context, cl.mem_flags
-            self._frame = {"cam": cl.Buffer(ctx, mf.READ_ONLY, 16 * 4),
+            self._frame = {"cam": cl.Buffer(ctx, mf.READ_ONLY, CAM_BYTES),
                            "feat": cl.Buffer(ctx, mf.READ_WRITE, 32 * n),
                            "depth": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n),
                            "n_march": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n),
