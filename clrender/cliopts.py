@@ -22,10 +22,11 @@ def _declared(plugin, kind: str) -> dict:
 def _argument(name: str, opt: methods.Option) -> dict:
     """argparse keywords of an option; an absent flag parses as None (not given)."""
     if opt.type is bool:
-        state = "on by default; this flag turns it off" if opt.default is True else \
-            "off by default"
+        # The help says what the flag does: a --no-X flag turns the option off.
+        text = f"turn off: {opt.help} (on without this flag)" if opt.default is True else \
+            f"{opt.help} (off without this flag)"
         return {"action": "store_const", "const": opt.default is not True, "default": None,
-                "help": f"{opt.help} ({state})"}
+                "help": text}
     default = "" if opt.default is None else f" (default: {opt.default})"
     return {"type": opt.type, "choices": opt.choices, "nargs": opt.nargs, "default": None,
             "metavar": None if opt.choices else name.upper(), "help": opt.help + default}

@@ -20,10 +20,8 @@ Examples:
 """
 from __future__ import annotations
 
-import inspect
 import threading
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,10 +32,29 @@ from . import methods
 from .camera import Camera
 from .paths import ORBIT
 from .renderer import Renderer
+from .video import to_uint8
 
 DEFAULT_PORT = 8080          # viser moves on to the next free port when it is taken
 CV_FROM_GL = np.diag([1.0, -1.0, -1.0])  # camera axes: NeRF/Blender <-> OpenCV (its own inverse)
-_NO_DEFAULT = object()
+THUMBNAIL = 64               # long side of a training frustum's image, pixels
+
+
+def vertical_fov(fov_x: float, aspect: float) -> float:
+    """The vertical field of view (radians) of a horizontal ``fov_x`` at ``aspect`` (W / H)."""
+    return float(2.0 * np.arctan(np.tan(0.5 * fov_x) / aspect))
+
+
+def thumbnail(file) -> np.ndarray:
+    """(h, w, 3) uint8: an image file shrunk to :data:`THUMBNAIL` pixels on its long side
+    (JPEGs decoded at a reduced size), transparent pixels on white."""
+    from PIL import Image
+
+    with Image.open(file) as im:
+        im.draft("RGB", (THUMBNAIL, THUMBNAIL))
+        im.thumbnail((THUMBNAIL, THUMBNAIL))
+        rgba = im.convert("RGBA")
+    white = Image.new("RGBA", rgba.size, (255, 255, 255, 255))
+    return np.asarray(Image.alpha_composite(white, rgba).convert("RGB"))
 
 
 def viser_to_camera(position, wxyz, fov_y: float, aspect: float, height: int) -> Camera:
@@ -80,29 +97,10 @@ class OptionSpec:
 
 
 def option_specs(renderer_cls) -> list[OptionSpec]:
-    """The render options a method's renderer class declares in ``RENDER_OPTIONS``.
-
-    Accepts either form of the declaration: ``{name: type}`` (the default is then the
-    constructor's) or ``{name: declaration}``, a declaration being a mapping or an object
-    with ``type`` and optionally ``default``, ``choices`` and ``help``.
-    """
-    params = inspect.signature(renderer_cls.__init__).parameters
-    specs = []
-    for name, decl in renderer_cls.RENDER_OPTIONS.items():
-        fields = {"type": decl} if isinstance(decl, type) else decl
-        get = fields.get if isinstance(fields, Mapping) else \
-            (lambda key, fallback=None: getattr(decl, key, fallback))
-        default = get("default", _NO_DEFAULT)
-        if default is _NO_DEFAULT:
-            param = params.get(name)
-            if param is None or param.default is inspect.Parameter.empty:
-                raise ValueError(f"{renderer_cls.__name__}.RENDER_OPTIONS[{name!r}]: no default "
-                                 "declared and none in the constructor")
-            default = param.default
-        choices = get("choices", None)
-        specs.append(OptionSpec(name, get("type", None) or type(default), default,
-                                tuple(choices) if choices else None, get("help", "") or ""))
-    return specs
+    """The render options a method's renderer class declares in ``RENDER_OPTIONS``
+    (:class:`clrender.methods.Option`, as the method contract requires)."""
+    return [OptionSpec(name, opt.type, opt.default, opt.choices, opt.help)
+            for name, opt in renderer_cls.RENDER_OPTIONS.items()]
 
 
 def _add_control(gui, spec: OptionSpec):
@@ -118,11 +116,6 @@ def _add_control(gui, spec: OptionSpec):
     if spec.type in (int, float):
         return gui.add_number(spec.name, spec.type(spec.default), hint=hint), spec.type
     return gui.add_text(spec.name, str(spec.default), hint=hint), spec.type
-
-
-def _to_uint8(rgb: np.ndarray) -> np.ndarray:
-    """(H, W, 3) float in [0, 1] -> (H, W, 3) uint8, rounded."""
-    return (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
 def _stats_markdown(out: dict, frame_ms: float, width: int, height: int) -> str:
@@ -145,7 +138,9 @@ class _ClientLoop(threading.Thread):
         self.shown = (0, 1.0)       # (camera version, scale) of the last frame sent
         client.camera.on_update(self._moved)
 
-    def _moved(self, _camera) -> None:
+    def _moved(self, camera) -> None:
+        if self.version == 0:
+            self.viewer.first_camera(camera)
         with self._lock:
             self.version += 1
             self.moved_at = time.monotonic()
@@ -199,7 +194,11 @@ class Viewer:
     def __init__(self, model, data=None, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  device=None, max_size: int = 800, preview_scale: float = 0.4,
                  rest_s: float = 0.3, jpeg_quality: int = 90):
-        self.model = methods.load(model) if not hasattr(model, "method") else model
+        from .bakedfile import trained_downscale
+
+        loaded = hasattr(model, "method")
+        self.downscale = 1 if loaded else trained_downscale(model)
+        self.model = model if loaded else methods.load(model)
         self.device, self.jpeg_quality, self.rest_s = device, int(jpeg_quality), float(rest_s)
         self.renderer = Renderer(self.model, device=device)
         self.frames_sent, self.last_frame = 0, None
@@ -238,7 +237,14 @@ class Viewer:
         cam.position = (r * np.cos(el), 0.0, r * np.sin(el))
         cam.look_at = (0.0, 0.0, 0.0)
         cam.up = (0.0, 0.0, 1.0)
+        # viser's fov is vertical; the orbit's is horizontal: this holds it for a square
+        # canvas, and each browser's first camera gets its own aspect's (_ClientLoop).
         cam.fov = orbit["fov_x"]
+
+    def first_camera(self, camera) -> None:
+        """A browser's first camera state: its vertical fov set to give the orbit's
+        horizontal one at that browser's aspect."""
+        camera.fov = vertical_fov(ORBIT[self.model.config.scene]["fov_x"], camera.aspect)
 
     def _build_gui(self, max_size: int, preview_scale: float) -> None:
         gui = self.server.gui
@@ -277,17 +283,20 @@ class Viewer:
             loop.refresh()
 
     def _draw_training_cameras(self, data) -> None:
-        from .data import load_dataset
+        """The training cameras as frustums, each with a thumbnail: the files are scanned
+        (at the model's training downscale) and each image shrunk on its own, never all
+        decoded at full size."""
+        from .data import scan_dataset
 
-        ds = load_dataset(data, "train")
-        centres = np.stack([c.origin for c in ds.cameras])
+        views = scan_dataset(data, "train", self.downscale)
+        cameras = views.final_cameras()
+        centres = np.stack([c.origin for c in cameras])
         scale = 0.03 * float(np.median(np.linalg.norm(centres - centres.mean(0), axis=1)) or 1.0)
-        step = max(1, max(ds.images.shape[1:3]) // 64)
-        for i, (camera, image) in enumerate(zip(ds.cameras, ds.images)):
+        for i, (camera, file) in enumerate(zip(cameras, views.files)):
             wxyz, position, fov_y = camera_to_viser(camera)
             self.frustums.append(self.server.scene.add_camera_frustum(
                 f"/train/{i:04d}", fov=fov_y, aspect=camera.width / camera.height, scale=scale,
-                wxyz=wxyz, position=position, image=_to_uint8(image[::step, ::step])))
+                wxyz=wxyz, position=position, image=thumbnail(file)))
 
     def _connect(self, client) -> None:
         loop = _ClientLoop(self, client)
@@ -313,7 +322,7 @@ class Viewer:
         start = time.perf_counter()
         with self._render_lock:
             out = self.renderer.render(camera)
-        image = _to_uint8(out["rgb"])
+        image = to_uint8(out["rgb"])
         client.scene.set_background_image(image, format="jpeg", jpeg_quality=self.jpeg_quality)
         client.flush()
         self.frames_sent, self.last_frame = self.frames_sent + 1, (camera, image)

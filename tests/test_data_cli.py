@@ -5,6 +5,7 @@ nerfstudio transforms.json."""
 import json
 import shutil
 
+import imageio.v3 as iio
 import numpy as np
 import pytest
 from dataset_fixtures import H, W, write_colmap, write_images, write_transforms
@@ -95,8 +96,19 @@ def test_train_bake_eval_render(tmp_path, capsys, fmt, one_torch_thread):
     capsys.readouterr()
     assert main(["eval", str(model), str(data), "--save", str(tmp_path / "views")]) == 0
     result = json.loads(capsys.readouterr().out)
-    assert np.isfinite(result["psnr"]) and result["psnr"] > 5.0
-    import imageio.v3 as iio
+    # A PSNR floor cannot tell this pipeline from a grey image: these random views are not
+    # learnable in 20 `tiny` steps (measured: 16.65 / 10.61 dB, a flat grey 16.82 / 10.69).
+    # So the reported figure is checked against the saved renders, which must be the
+    # model's (not constant).
+    from clrender.data import load_dataset
+    from clrender.metrics import psnr
+
+    test = load_dataset(data, split="test", downscale=downscale)
+    saved = [iio.imread(tmp_path / "views" / f"test_{i:03d}.png")[..., :3] / 255.0
+             for i in range(len(test.images))]
+    assert all(im.std(axis=(0, 1)).max() > 1e-3 for im in saved)
+    assert result["psnr"] == pytest.approx(np.mean([psnr(im, gt) for im, gt in
+                                                    zip(saved, test.images)]), abs=0.05)
     assert iio.imread(tmp_path / "views" / "test_000.png").shape == (
         H // downscale, W // downscale, 3)
     assert main(["render", str(model), "--path", "test", "--data", str(data), "--frames", "2",

@@ -332,6 +332,7 @@ def _train_stopped_at(monkeypatch, step: int, *args, **kwargs) -> None:
     monkeypatch.setattr(RunFolder, "save_checkpoint", save)
 
 
+@pytest.mark.slow
 def test_train_resume_and_bake(tmp_path, small_run_inputs, monkeypatch):
     from clrender.ndrf import train as ndrf_train
     from clrender.ndrf.baked import load_baked
@@ -370,6 +371,7 @@ def test_train_resume_and_bake(tmp_path, small_run_inputs, monkeypatch):
     assert model.background == (1.0, 1.0, 1.0)
 
 
+@pytest.mark.slow
 def test_disk_backed_training_equals_in_memory(tmp_path, small_run_inputs, monkeypatch):
     """Views forced onto disk (a 1-byte budget) train the same model bit for bit as views in
     memory, also when the disk-backed run is interrupted and resumed; the budget is not in

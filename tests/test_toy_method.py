@@ -123,3 +123,24 @@ def test_a_one_row_bench_table_and_a_train_curve(toy, scene, tmp_path, capsys):
     assert {p["method"] for p in points} == {"toy"} and points[-1]["teacher_test_psnr"] == ""
     final = float(points[-1]["test_psnr"])
     assert final == pytest.approx(ref["psnr"], abs=1e-4)      # the tables' model: same training
+
+
+def test_toy_in_the_viewer_controls_and_the_device_check(toy, tmp_path):
+    """The viewer's controls are the toy's render options; bench.device_check makes and
+    checks the toy's example model like any method's (in this process: its registration
+    lives on this test's sys.path)."""
+    from bench import device_check
+    from clrender import viewer
+
+    assert viewer.option_specs(toy.Renderer) == [
+        viewer.OptionSpec("gain", float, 1.0, None, "colour gain")]
+    assert "toy" in device_check.checked_methods()
+    folder = tmp_path / "ref"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(device_check, "SIZES", ((12, 8),))
+        device_check.make_reference(folder)
+        assert "toy" in json.loads((folder / "reference.json").read_text())["methods"]
+        rows = device_check.check_device(0, folder, device_check.load_reference(folder), 1,
+                                         ((12, 8),))
+    toy_rows = [r for r in rows if r["method"] == "toy"]
+    assert len(toy_rows) == 1 and "error" not in toy_rows[0], rows

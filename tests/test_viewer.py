@@ -11,13 +11,15 @@ import os
 import shutil
 import threading
 import time
-from dataclasses import dataclass
 from types import SimpleNamespace
 
+import imageio.v3 as iio
 import numpy as np
 import pytest
 
+from clrender import methods
 from clrender.camera import Camera, generate_rays, look_at
+from clrender.paths import ORBIT
 from clrender.ngprt.config import preset
 from clrender.ngprt.random_model import random_baked_model
 
@@ -85,52 +87,37 @@ def test_camera_to_viser_inverts_viser_to_camera():
                                (cam.fx, cam.fy, cam.cx, cam.cy), rtol=1e-12)
 
 
-@dataclass
-class _Declared:
-    type: type
-    default: object
-    choices: tuple = ()
-    help: str = ""
+def test_option_specs_are_the_declared_options():
+    ngprt = methods.get("ngprt").Renderer
+    assert viewer.option_specs(ngprt) == [viewer.OptionSpec(
+        "use_G", bool, True, None, ngprt.RENDER_OPTIONS["use_G"].help)]
+    hits = methods.get("ndrf").Renderer.RENDER_OPTIONS["hits"]
+    assert viewer.OptionSpec("hits", str, hits.default, hits.choices, hits.help) in \
+        viewer.option_specs(methods.get("ndrf").Renderer)
 
 
-class _TypesOnly:
-    RENDER_OPTIONS = {"use_G": bool, "steps": int}
-
-    def __init__(self, model, device=None, use_G: bool = True, steps: int = 3):
-        pass
-
-
-class _Declarations:
-    RENDER_OPTIONS = {"hits": _Declared(str, "raster", ("raster", "embree"), "hit source"),
-                      "gain": {"type": float, "default": 0.5}}
-
-    def __init__(self, model, device=None, **options):
-        pass
-
-
-def test_option_specs_read_either_form_of_render_options():
-    assert viewer.option_specs(_TypesOnly) == [viewer.OptionSpec("use_G", bool, True),
-                                                viewer.OptionSpec("steps", int, 3)]
-    assert viewer.option_specs(_Declarations) == [
-        viewer.OptionSpec("hits", str, "raster", ("raster", "embree"), "hit source"),
-        viewer.OptionSpec("gain", float, 0.5)]
-
-
-def test_option_specs_refuse_an_option_without_default():
-    class NoDefault:
-        RENDER_OPTIONS = {"mode": str}
-
-        def __init__(self, model, mode):
-            pass
-
-    with pytest.raises(ValueError, match=r"NoDefault.RENDER_OPTIONS\['mode'\]: no default"):
-        viewer.option_specs(NoDefault)
+def test_first_camera_gets_the_orbits_horizontal_fov_and_thumbnails_are_small(tmp_path):
+    assert viewer.vertical_fov(0.8, 1.0) == pytest.approx(0.8)
+    fov_y = viewer.vertical_fov(0.8, 16 / 9)
+    assert np.tan(fov_y / 2) * 16 / 9 == pytest.approx(np.tan(0.4))
+    camera = SimpleNamespace(aspect=2.0, fov=None)
+    viewer.Viewer.first_camera(SimpleNamespace(model=SimpleNamespace(
+        config=SimpleNamespace(scene="bounded"))), camera)
+    assert camera.fov == pytest.approx(viewer.vertical_fov(ORBIT["bounded"]["fov_x"], 2.0))
+    rgba = np.zeros((300, 200, 4), np.uint8)
+    rgba[:150, :, :3], rgba[:150, :, 3] = (10, 200, 30), 255       # top half opaque green
+    iio.imwrite(tmp_path / "view.png", rgba)
+    thumb = viewer.thumbnail(tmp_path / "view.png")
+    assert thumb.shape == (64, 43, 3) and thumb.dtype == np.uint8
+    np.testing.assert_array_equal(thumb[5, 5], (10, 200, 30))
+    np.testing.assert_array_equal(thumb[-5, 5], (255, 255, 255))   # transparent: white
 
 
 def test_client_loop_previews_while_moving_then_draws_full_size():
     draws, moves = [], []
     fake = SimpleNamespace(rest_s=0.3, preview_scale=0.25,
-                           draw=lambda client, scale: draws.append((time.monotonic(), scale)))
+                           draw=lambda client, scale: draws.append((time.monotonic(), scale)),
+                           first_camera=lambda camera: None)
     callbacks = []
     client = SimpleNamespace(client_id=7, camera=SimpleNamespace(on_update=callbacks.append))
     loop = viewer._ClientLoop(fake, client)
@@ -159,7 +146,8 @@ def test_client_loop_shows_a_failed_frame_and_serves_on():
         if len(calls) == 1:
             raise RuntimeError("device lost")
 
-    fake = SimpleNamespace(rest_s=0.05, preview_scale=0.5, draw=draw, show_error=errors.append)
+    fake = SimpleNamespace(rest_s=0.05, preview_scale=0.5, draw=draw, show_error=errors.append,
+                           first_camera=lambda camera: None)
     callbacks = []
     client = SimpleNamespace(client_id=1, camera=SimpleNamespace(on_update=callbacks.append))
     loop = viewer._ClientLoop(fake, client)

@@ -182,15 +182,6 @@ def extract_mesh(alpha: np.ndarray, threshold: float, box=(-1.0, 1.0),
     return mesh, stats
 
 
-def extract_meshes(alpha: np.ndarray, thresholds, box=(-1.0, 1.0), min_component: float = 0.02,
-                   face_budget: int | None = None, cameras=None) -> list[trimesh.Trimesh]:
-    """K meshes at increasing alpha ``thresholds`` (outer mesh first); see :func:`extract_mesh`."""
-    thresholds = NDRFConfig(thresholds=thresholds).thresholds      # validates them
-    cameras = None if cameras is None else list(cameras)
-    return [extract_mesh(alpha, t, box, min_component, face_budget, cameras)[0]
-            for t in thresholds]
-
-
 def drop_small_components(mesh: trimesh.Trimesh, min_diag: float):
     """Remove connected parts (by shared edges) whose bounding-box diagonal is < ``min_diag``
     world units. Returns the mesh and how many parts were removed."""
