@@ -32,9 +32,10 @@
  * Depth test: per pixel and mesh the least camera-space depth V / (n . r), the smaller
  * triangle id on a tie (whatever order the tile's list holds its triangles in).
  *
- * Buffers: tri_geo (faces, 16) 32-bit words, all the tile pass reads of a triangle in one
- * 64-byte record: c (9), n (3), V (floats), then its rows y0 | y1 << 16, its face within
- * its mesh, its mesh | the tie-ownership bits of its 3 edges << 8 (ints); tri_box
+ * Buffers: tri_geo (faces, TRI_WORDS) 32-bit words, all the tile pass reads of a triangle
+ * in one 64-byte record (offsets TRI_* below): c (9), n (3), V (floats), then its rows
+ * y0 | y1 << 16, its face within its mesh, its mesh | the tie-ownership bits of its 3
+ * edges << 8 (ints); tri_box
  * (faces, 4) int: x0, y0, x1, y1 inclusive pixel bounds (x0 > x1: covers nothing);
  * tile_count (n_tiles) int, then each tile's cursor (its first slot, advanced by
  * ndrf_raster_bin); tile_start (n_tiles + 1) int; list
@@ -43,21 +44,32 @@
  * image's last column, so nothing covers them), then b (height floats) of
  * kernels/camera.h, computed once a frame on the host with the same float32 operations
  * (clrender/ndrf/raster_cl.py).
- * -D defines (clrender/ndrf/raster_cl.py): K, TS (tile side: 16, the vector width),
+ * -D defines (clrender/ndrf/raster_cl.py): K, TRI_WORDS (a triangle record's words: 16),
+ * TS (tile side: 16, the vector width),
  * TROWS (rows of a tile a work-item covers, dividing TS: TS on CPUs, 1 on GPUs), LANES
  * (triangles a setup work-item: 16, the vector width).
  */
 #include "camera.h"
 #pragma OPENCL FP_CONTRACT OFF
 
-#if !defined(K) || !defined(TS) || !defined(TROWS) || !defined(LANES)
-#error "ndrf_raster.cl needs -D K TS TROWS LANES"
+#if !defined(K) || !defined(TS) || !defined(TROWS) || !defined(LANES) || !defined(TRI_WORDS)
+#error "ndrf_raster.cl needs -D K TS TROWS LANES TRI_WORDS"
 #endif
 #if TS != 16 || TS % TROWS != 0
 #error "TS must be 16 (one float16 a tile row) and a multiple of TROWS"
 #endif
 #if LANES != 16
 #error "LANES must be 16 (the setup's triangles, one a float16 lane)"
+#endif
+/* The triangle record's fields (word offsets). */
+#define TRI_C 0                 /* 3 edge functions, 3 floats each */
+#define TRI_N 9                 /* the plane normal (3 floats) */
+#define TRI_V 12                /* the plane offset */
+#define TRI_ROWS 13             /* y0 | y1 << 16 */
+#define TRI_FACE 14             /* its face within its mesh */
+#define TRI_META 15             /* its mesh | its edges' tie bits << 8 */
+#if TRI_WORDS != TRI_META + 1
+#error "TRI_WORDS must count the record's fields"
 #endif
 #define GROUPS (TS / TROWS)
 #define NONE 0x7fffffff
@@ -234,12 +246,12 @@ __kernel void ndrf_raster_setup(__global const float *cam, const int width, cons
     const int16 facing = (V != 0.0f) & ((v[0][2] < 0.0f) | (v[1][2] < 0.0f) | (v[2][2] < 0.0f));
     const int16 ok = facing & (x0 <= x1) & (y0 <= y1);
     /* The records, lane by lane through private memory. */
-    float rec[13][LANES];
+    float rec[TRI_ROWS][LANES];
     int rows[LANES], meta[LANES], box[4][LANES];
     for (int j = 0; j < 3; ++j)
-        for (int e = 0; e < 3; ++e) vstore16(c[j][e], 0, rec[3 * j + e]);
-    for (int j = 0; j < 3; ++j) vstore16(s * n[j], 0, rec[9 + j]);
-    vstore16(s * V, 0, rec[12]);
+        for (int e = 0; e < 3; ++e) vstore16(c[j][e], 0, rec[TRI_C + 3 * j + e]);
+    for (int j = 0; j < 3; ++j) vstore16(s * n[j], 0, rec[TRI_N + j]);
+    vstore16(s * V, 0, rec[TRI_V]);
     vstore16(y0 | y1 << 16, 0, rows);      /* height < 2^16 (clrender/ndrf/raster_cl.py) */
     vstore16(mesh | (edge_owns_ties(c[0]) | edge_owns_ties(c[1]) << 1
                      | edge_owns_ties(c[2]) << 2) << 8, 0, meta);
@@ -248,15 +260,15 @@ __kernel void ndrf_raster_setup(__global const float *cam, const int width, cons
     vstore16(select((int16)(0), x1, ok), 0, box[2]);
     vstore16(y1, 0, box[3]);
     for (int l = 0; l < LANES && g0 + l < n_faces; ++l) {
-        __global float *geo = tri_geo + 16 * (g0 + l);
+        __global float *geo = tri_geo + TRI_WORDS * (g0 + l);
         __global int *w = (__global int *)geo;
-        for (int j = 0; j < 13; ++j) geo[j] = rec[j][l];
-        w[13] = rows[l];
-        w[14] = id[l];
-        w[15] = meta[l];
+        for (int j = 0; j < TRI_ROWS; ++j) geo[j] = rec[j][l];
+        w[TRI_ROWS] = rows[l];
+        w[TRI_FACE] = id[l];
+        w[TRI_META] = meta[l];
         for (int j = 0; j < 4; ++j) tri_box[4 * (g0 + l) + j] = box[j][l];
         float cl[9];
-        for (int j = 0; j < 9; ++j) cl[j] = rec[j][l];
+        for (int j = 0; j < 9; ++j) cl[j] = rec[TRI_C + j][l];
         for_each_tile(g0 + l, cl, (int4)(box[0][l], box[1][l], box[2][l], box[3][l]), width,
                       ray_ab, tile_count, 0, 0);
     }
@@ -286,7 +298,7 @@ __kernel void ndrf_raster_bin(const int width, const int n_faces, __global const
     const int g = (int)get_global_id(0);
     if (g >= n_faces) return;
     float c[9];
-    for (int j = 0; j < 9; ++j) c[j] = tri_geo[16 * g + j];
+    for (int j = 0; j < 9; ++j) c[j] = tri_geo[TRI_WORDS * g + TRI_C + j];
     for_each_tile(g, c, vload4(g, tri_box), width, ray_ab, cursor, capacity, list);
 }
 
@@ -321,18 +333,19 @@ __kernel void ndrf_raster_tile(const int width, const int height, __global const
     const int end = tile_start[tile + 1];
     for (int i = tile_start[tile]; i < end; ++i) {
         const int g = list[i];
-        __global const float *geo = tri_geo + 16 * g;
+        __global const float *geo = tri_geo + TRI_WORDS * g;
         __global const int *words = (__global const int *)geo;
-        const uint rows = (uint)words[13];
-        const int meta = words[15];
+        const uint rows = (uint)words[TRI_ROWS];
+        const int meta = words[TRI_META];
         const int r0 = max((int)(rows & 0xffff) - y0, 0);
         const int r1 = min((int)(rows >> 16) - y0, TROWS - 1);
         if (r0 > r1) continue;
-        const float c00 = geo[0], c01 = geo[1], c02 = geo[2], c10 = geo[3], c11 = geo[4],
-                    c12 = geo[5], c20 = geo[6], c21 = geo[7], c22 = geo[8], n0 = geo[9],
-                    n1 = geo[10], n2 = geo[11], V = geo[12];
+        __global const float *tc = geo + TRI_C, *tn = geo + TRI_N;
+        const float c00 = tc[0], c01 = tc[1], c02 = tc[2], c10 = tc[3], c11 = tc[4],
+                    c12 = tc[5], c20 = tc[6], c21 = tc[7], c22 = tc[8], n0 = tn[0],
+                    n1 = tn[1], n2 = tn[2], V = geo[TRI_V];
         const int16 own0 = (int16)(-((meta >> 8) & 1)), own1 = (int16)(-((meta >> 9) & 1)),
-                    own2 = (int16)(-((meta >> 10) & 1)), id = (int16)(words[14]);
+                    own2 = (int16)(-((meta >> 10) & 1)), id = (int16)(words[TRI_FACE]);
         const int k = meta & 0xff;
         for (int r = r0; r <= r1; ++r) {
             const float ry = ray_b[y0 + r];

@@ -38,6 +38,7 @@ F32, I32 = np.float32, np.int32
 TS = 16                     # pixels a side of a tile: one float16 a tile row
 INITIAL_PAIRS = 1 << 16     # (triangle, tile) list slots first allocated; grown on demand
 SETUP_LANES = 16            # triangles a work-item of ndrf_raster_setup (-D LANES)
+TRI_WORDS = 16              # 32-bit words of a triangle's setup record (-D TRI_WORDS)
 
 
 def rows_per_item(device: cl.Device) -> int:
@@ -134,7 +135,7 @@ class Rasteriser:
         if self.rows < 1 or TS % self.rows:
             raise ValueError(f"rows={rows}: must divide the tile side {TS}")
         program = rt.program("ndrf_raster.cl", {"K": self.K, "TS": TS, "TROWS": self.rows,
-                                                "LANES": SETUP_LANES})
+                                                "LANES": SETUP_LANES, "TRI_WORDS": TRI_WORDS})
         self._kernels = {n: program.kernel(n) for n in self.KERNELS}
         meshes, orders = zip(*[spatially_ordered(v, f) for v, f in meshes])
         geometry = packed_geometry(meshes)
@@ -147,8 +148,9 @@ class Rasteriser:
                                      else np.zeros(3, a.dtype))
                      for name, a in geometry.items()}
         n = max(self.n_faces, 1)
-        check_allocation(rt.device, f"raster triangle setup ({self.n_faces} faces)", 64 * n)
-        self._setup = {"tri_geo": cl.Buffer(rt.context, mf.READ_WRITE, 64 * n),
+        record = 4 * TRI_WORDS
+        check_allocation(rt.device, f"raster triangle setup ({self.n_faces} faces)", record * n)
+        self._setup = {"tri_geo": cl.Buffer(rt.context, mf.READ_WRITE, record * n),
                        "tri_box": cl.Buffer(rt.context, mf.READ_WRITE, 16 * n)}
         self._capacity = 0
         self.binned_pairs = 0        # (triangle, tile) pairs the last frame binned
