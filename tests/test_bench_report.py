@@ -22,6 +22,20 @@ def test_table4_rows_pair_G_off_and_on():
     assert [(r.model["L"], r.render["use_G"]) for r in t.rows] == [(L, g) for L in (2, 3, 4) for g in (False, True)]
 
 
+@pytest.mark.parametrize("preset", methods.get("ndrf").PRESETS)
+def test_ndrf_table3_single_surface_is_the_full_models_outer_one(preset):
+    """At every preset the single-surface row changes the surface count alone."""
+    t = ablation.load_table("ndrf-table3")
+    spec = {r.name: methods.get("ndrf").model_spec(
+        preset, **{k: v for k, v in r.model.items() if k != "teacher"}) for r in t.rows}
+    full, single = spec["Full (duplex + conv + distill)"], spec["Single surface (outer)"]
+    assert t.rows[-1].model == {"teacher": t.rows[0].model["teacher"]}   # the preset's own
+    assert len(full["model"]["thresholds"]) == 2
+    assert single["model"]["thresholds"] == full["model"]["thresholds"][:1]
+    assert {**single, "model": {**single["model"], "thresholds": None}} == \
+        {**full, "model": {**full["model"], "thresholds": None}}
+
+
 def test_unknown_table_lists_the_known_ones():
     with pytest.raises(ValueError, match="table4"):
         ablation.load_table("table9")
