@@ -37,10 +37,6 @@ def speedup_cell(s: dict | None) -> str:
     return f"{s['ratio']:.2f}x ({s['lo']:.2f}-{s['hi']:.2f}, {s['n']} pairs)"
 
 
-def _paper(row, key: str):
-    return row.paper.get(key)
-
-
 def measure(table, results: list) -> list[dict]:
     """One record per comparison of ``table`` (``results``: one per row, from
     :func:`bench.seeds.aggregate` or of one seed): ``row``, ``against``, ``claim``,
@@ -55,8 +51,8 @@ def measure(table, results: list) -> list[dict]:
     for c in table.comparisons:
         (row, m), (against, b) = rows[c.row], rows[c.against]
         a, z = _psnrs(m), _psnrs(b)
-        paper = (None if _paper(row, "PSNR") is None or _paper(against, "PSNR") is None
-                 else _paper(row, "PSNR") - _paper(against, "PSNR"))
+        p_row, p_against = row.paper.get("PSNR"), against.paper.get("PSNR")
+        paper = None if p_row is None or p_against is None else p_row - p_against
         rec = {"row": c.row, "against": c.against, "claim": c.claim, "margin": c.margin,
                "n": len(a), "mean": a[0] - z[0], "std": None, "lo": None, "hi": None,
                "confidence": None, "paper": paper, "verdict": "", "seeds_needed": None}
@@ -71,7 +67,7 @@ def measure(table, results: list) -> list[dict]:
             rec.update(mean=mean, std=std, lo=lo, hi=hi, confidence=conf, verdict=verdict,
                        seeds_needed=seeds.seeds_to_resolve(target, std, conf)
                        if verdict == "underpowered" else None)
-        t_row, t_against = _paper(row, "Time (ms)"), _paper(against, "Time (ms)")
+        t_row, t_against = row.paper.get("Time (ms)"), against.paper.get("Time (ms)")
         rec["speedup"] = speedup(m, b, row, against)
         rec["speedup_paper"] = None if t_row is None or t_against is None else t_against / t_row
         out.append(rec)
@@ -85,7 +81,7 @@ def verdict_cell(rec: dict) -> str:
     if rec["verdict"] != "underpowered":
         return rec["verdict"]
     need = rec["seeds_needed"]
-    return ("underpowered (more than 100000 seeds needed)" if need is None
+    return (f"underpowered (more than {seeds.SEEDS_LIMIT} seeds needed)" if need is None
             else f"underpowered ({need} seeds would resolve it)")
 
 

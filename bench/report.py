@@ -60,7 +60,7 @@ def _ours(table, col: str, m, n_seeds: int) -> str:
     return f"{_fmt(table, col, value)} ± {_fmt(table, col, None if s is None else s['std'])}"
 
 
-def _head(table, extra: list[str], n_seeds: int) -> list[str]:
+def _head(table, extra: list[str]) -> list[str]:
     head = ["Row"]
     for col in table.paper_columns:
         head += [col, f"{col} (paper)"]
@@ -77,7 +77,7 @@ def markdown(table, results: list, meta: dict, claims: list[dict]) -> str:
     paper's claims (``claims``, from :func:`bench.compare.measure`) with their verdicts."""
     n = _n_seeds(results)
     extra = [c for c in _stat_columns(table, results) if c not in table.paper_columns]
-    head = _head(table, extra, n)
+    head = _head(table, extra)
     ratios = any(r.baseline for r in table.rows)
     ours_x = speedups(table, results)
     paper_x = speedups(table, results, key=lambda row, m: row.paper.get("Time (ms)"))

@@ -72,6 +72,7 @@ def paired_delta(row: list[float], base: list[float]) -> tuple[float, float]:
 
 CONFIDENCE = 0.95       # two-sided level of a difference's interval
 EQUIVALENCE_CONFIDENCE = 0.90   # two one-sided tests at 5% each: a 90% interval
+SEEDS_LIMIT = 100_000   # the most seeds :func:`seeds_to_resolve` looks for
 
 
 def half_width(std: float, n: int, confidence: float = CONFIDENCE) -> float:
@@ -89,7 +90,7 @@ def interval(mean: float, std: float, n: int, confidence: float = CONFIDENCE) ->
 
 
 def seeds_to_resolve(effect: float, std: float, confidence: float = CONFIDENCE,
-                     limit: int = 100_000) -> int | None:
+                     limit: int = SEEDS_LIMIT) -> int | None:
     """The smallest number of seeds n >= 2 whose interval at today's ``std`` is narrower
     than ``|effect|`` (t_{(1+c)/2, n-1} std / sqrt(n) < |effect|); None for no effect or
     beyond ``limit`` seeds."""

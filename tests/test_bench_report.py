@@ -345,3 +345,13 @@ def test_summary_errors_name_the_file(tmp_path, capsys):
     assert report.main(["--results", str(tmp_path / "none")]) == 2
     assert "none: no such folder" in capsys.readouterr().err
     assert summary.summary(tmp_path / "none").startswith("No table has been run into")
+
+
+def test_the_projects_readme_takes_the_summary(tmp_path):
+    from pathlib import Path
+
+    readme = tmp_path / "README.md"
+    readme.write_text((Path(__file__).resolve().parents[1] / "README.md").read_text())
+    assert summary.copy_into(readme, "generated") is True
+    text = readme.read_text()
+    assert f"{summary.BEGIN}\ngenerated\n{summary.END}" in text and "## Usage" in text
