@@ -36,6 +36,19 @@ def test_ndrf_table3_single_surface_is_the_full_models_outer_one(preset):
         {**full, "model": {**full["model"], "thresholds": None}}
 
 
+@pytest.mark.parametrize("preset, same_as", [("cpu", "1e-2"), ("tiny", "1e-4")])
+def test_ndrf_table3_single_surface_shares_the_thresholds_tables_models(tmp_path, preset,
+                                                                       same_as):
+    """The README quotes the thresholds table's row for Table 3's single surface: one model."""
+    from bench import cache
+
+    single = ablation.load_table("ndrf-table3").rows[0]
+    row = next(r for r in ablation.load_table("ndrf-thresholds").rows if r.name == same_as)
+    keys = [cache.plan_model(tmp_path, tmp_path, "fp", preset, "ndrf", r.model).key
+            for r in (single, row)]
+    assert keys[0] == keys[1]
+
+
 def test_unknown_table_lists_the_known_ones():
     with pytest.raises(ValueError, match="table4"):
         ablation.load_table("table9")
