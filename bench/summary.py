@@ -32,10 +32,9 @@ def run_line(data: dict) -> str:
             f"scene, {data['device']}, {data['date']}, git {data['git_revision']}.")
 
 
-def table_summary(data: dict, run: str | None = None) -> list[str]:
-    """Markdown lines of one table's summary from its JSON ``data``; ``run`` replaces the
-    line that says how it was run (:func:`run_line`)."""
-    lines = [f"### {data['title']}", "", run or run_line(data), ""]
+def table_summary(data: dict) -> list[str]:
+    """Markdown lines of one table's summary from its JSON ``data``."""
+    lines = [f"### {data['title']}", "", run_line(data), ""]
     if not data["comparisons"]:
         return lines + ["No comparisons.", ""]
     lines += ["| Claim | ΔPSNR ours (dB, interval) | ΔPSNR paper | Speed-up ours | "
