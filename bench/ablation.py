@@ -6,6 +6,14 @@ asked for as ``method/name``. A table names its method (rows may override it); e
 names ``model`` options (what is trained, checked by the row's method's
 ``check_model_options``: NGP-RT ``variant``, ``L``; NDRF ``thresholds``, ``teacher``, ...)
 and ``render`` options (its Renderer's ``RENDER_OPTIONS``: NGP-RT ``use_G``).
+
+A row's ``baseline`` (or the table's) is the row its speed-up is measured against. The
+paper's claims are the table's comparisons, each a row against another (PSNR difference
+row minus other, the paper's the same way). A row declares its own with ``compare``, a list
+of ``{ against = "ROW" }`` (a difference: :func:`bench.seeds.verdict`) or ``{ against =
+"ROW", claim = "equivalent", margin = 0.3 }`` (equivalent within ±margin dB:
+:func:`bench.seeds.equivalence`). A table where no row declares ``compare`` compares each
+row that has a baseline with it; one where any row does has exactly the declared ones.
 """
 from __future__ import annotations
 
@@ -35,6 +43,21 @@ class Row:
     baseline: str | None = None     # name of the row this row's speed-up is measured against
 
 
+CLAIMS = ("difference", "equivalent")
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """A claim of the paper about two rows: ``row`` against ``against`` (PSNR difference row
+    minus against). ``claim``: "difference" (the paper's difference, by its sign) or
+    "equivalent" (within ±``margin`` dB)."""
+
+    row: str
+    against: str
+    claim: str = "difference"
+    margin: float | None = None
+
+
 @dataclass(frozen=True)
 class Table:
     """A paper table to reproduce (one TOML file of a method's ``ABLATIONS`` folder)."""
@@ -49,6 +72,7 @@ class Table:
     rows: tuple[Row, ...]
     show_stages: bool = False       # a column with the per-stage times (NDRF tables)
     timing_sizes: tuple[int, ...] = ()   # frame widths also timed (test cameras scaled)
+    comparisons: tuple[Comparison, ...] = ()
 
     @property
     def stem(self) -> str:
@@ -119,6 +143,44 @@ def _row(spec: dict, i: int, r: dict, path: Path) -> Row:
                paper=dict(r.get("paper", {})), baseline=r.get("baseline", spec.get("baseline")))
 
 
+def _compare(r: dict, names: set, path: Path) -> list[Comparison]:
+    """A row's declared comparisons (its ``compare`` list), checked."""
+    where = f"{path}: row {r['name']!r}: compare"
+    declared = r.get("compare", [])
+    if not isinstance(declared, list) or not all(isinstance(c, dict) for c in declared):
+        raise ValueError(f"{where} takes a list of tables ({{ against = \"ROW\" }}), "
+                         f"got {declared!r}")
+    out = []
+    for c in declared:
+        unknown = sorted(set(c) - {"against", "claim", "margin"})
+        if unknown:
+            raise ValueError(f"{where}: unknown keys {unknown}; expected against, claim, margin")
+        against, claim, margin = c.get("against"), c.get("claim", "difference"), c.get("margin")
+        if against not in names or against == r["name"]:
+            raise ValueError(f"{where}: against {against!r} is not another row of the table")
+        if claim not in CLAIMS:
+            raise ValueError(f"{where}: claim {claim!r} is none of {list(CLAIMS)}")
+        if (claim == "equivalent") != (margin is not None):
+            raise ValueError(f"{where}: a margin (dB) is for claim \"equivalent\" and needed "
+                             f"there, got claim {claim!r} and margin {margin!r}")
+        if margin is not None and (isinstance(margin, bool) or not isinstance(margin, (int, float))
+                                   or not margin > 0):
+            raise ValueError(f"{where}: margin {margin!r} must be a number of dB > 0")
+        out.append(Comparison(r["name"], against, claim,
+                              None if margin is None else float(margin)))
+    return out
+
+
+def _comparisons(spec: dict, rows: list[Row], path: Path) -> tuple[Comparison, ...]:
+    """The declared comparisons, or with none declared each row against its baseline."""
+    names = {r.name for r in rows}
+    declared = [c for r in spec["rows"] for c in _compare(r, names, path)]
+    if declared:
+        return tuple(declared)
+    return tuple(Comparison(r.name, r.baseline) for r in rows
+                 if r.baseline is not None and r.baseline != r.name)
+
+
 def load_table(key: str) -> Table:
     """Parse and check the table ``key`` (a name, or ``method/name``; :func:`list_tables`)."""
     paths = _paths()
@@ -152,4 +214,5 @@ def load_table(key: str) -> Table:
                  scene=spec["scene"], preset=spec["preset"],
                  paper_columns=tuple(spec["paper_columns"]), rows=tuple(rows),
                  show_stages=bool(spec.get("show_stages", False)),
-                 timing_sizes=tuple(int(w) for w in spec.get("timing_sizes", ())))
+                 timing_sizes=tuple(int(w) for w in spec.get("timing_sizes", ())),
+                 comparisons=_comparisons(spec, rows, path))

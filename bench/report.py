@@ -11,7 +11,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from bench import ablation, columns, seeds
+from bench import columns, compare, seeds, summary
 from clrender.atomic import write_atomic
 
 
@@ -60,49 +60,24 @@ def _ours(table, col: str, m, n_seeds: int) -> str:
     return f"{_fmt(table, col, value)} ± {_fmt(table, col, None if s is None else s['std'])}"
 
 
-def effects(table, results: list) -> list[dict | None]:
-    """Per row against its baseline over seeds (results from :func:`bench.seeds.aggregate`):
-    {mean, std} of the paired PSNR differences (dB, row minus baseline, same seed),
-    ``paper`` (the paper's difference, None where it lacks a PSNR) and ``verdict``; None
-    for rows without a baseline, for the baseline itself, and for every row of one seed."""
-    if _n_seeds(results) < 2:
-        return [None] * len(results)
-    psnr = {row.name: [p.psnr for p in m.per_seed] for row, m in zip(table.rows, results)}
-    paper_psnr = {row.name: row.paper.get("PSNR") for row in table.rows}
-    out = []
-    for row in table.rows:
-        if row.baseline in (None, row.name):
-            out.append(None)
-            continue
-        mean, std = seeds.paired_delta(psnr[row.name], psnr[row.baseline])
-        mine, base = paper_psnr[row.name], paper_psnr[row.baseline]
-        paper = None if mine is None or base is None else mine - base
-        out.append({"mean": mean, "std": std, "paper": paper,
-                    "verdict": seeds.verdict(paper, mean, std, len(psnr[row.name]))})
-    return out
-
-
-def _head(table, extra: list[str], n_seeds: int) -> list[str]:
+def _head(table, extra: list[str]) -> list[str]:
     head = ["Row"]
     for col in table.paper_columns:
         head += [col, f"{col} (paper)"]
     if any(r.baseline for r in table.rows):
         head += ["Speed-up", "Speed-up (paper)"]
-        if n_seeds > 1:
-            head += ["ΔPSNR vs baseline", "ΔPSNR (paper)", "Verdict"]
     head += [f"Time at width {w} (ms)" for w in table.timing_sizes]
     return head + extra + ["Time p10-p90 (ms)"] + (["Stages (ms)"] if table.show_stages else []) \
         + ["Size (MB)", "Train (min)"]
 
 
-def markdown(table, results: list, meta: dict, deltas: list[dict | None]) -> str:
-    """The table with each paper column as "ours" and "paper" sub-columns; with several
-    seeds (results from :func:`bench.seeds.aggregate`) ours are "mean ± std" and rows with
-    a baseline say whether the paper's PSNR difference reproduces (``deltas``, from
-    :func:`effects`)."""
+def markdown(table, results: list, meta: dict, claims: list[dict]) -> str:
+    """The table with each paper column as "ours" and "paper" sub-columns (with several
+    seeds, results from :func:`bench.seeds.aggregate`, ours are "mean ± std"), then the
+    paper's claims (``claims``, from :func:`bench.compare.measure`) with their verdicts."""
     n = _n_seeds(results)
     extra = [c for c in _stat_columns(table, results) if c not in table.paper_columns]
-    head = _head(table, extra, n)
+    head = _head(table, extra)
     ratios = any(r.baseline for r in table.rows)
     ours_x = speedups(table, results)
     paper_x = speedups(table, results, key=lambda row, m: row.paper.get("Time (ms)"))
@@ -110,16 +85,14 @@ def markdown(table, results: list, meta: dict, deltas: list[dict | None]) -> str
              f"Ours: {meta['scene']} scene, `{meta['preset']}` preset, {meta['device']}, "
              f"test views at {meta['resolution']}. Paper: {table.paper_source}.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for row, m, ox, px, d in zip(table.rows, results, ours_x, paper_x, deltas):
+    for row, m, ox, px in zip(table.rows, results, ours_x, paper_x):
         cells = [row.name]
         for col in table.paper_columns:
             cells += [_ours(table, col, m, n), _fmt(table, col, row.paper.get(col))]
         if ratios:
-            cells += ["" if ox is None else f"{ox:.2f}x", "" if px is None else f"{px:.2f}x"]
-            if n > 1:
-                cells += ["", "", ""] if d is None else [
-                    f"{d['mean']:+.2f} ± {d['std']:.2f}",
-                    "" if d["paper"] is None else f"{d['paper']:+.2f}", d["verdict"]]
+            paired = getattr(m, "paired_speedup", None)
+            cells += [compare.speedup_cell(None if ox is None else paired or {"ratio": ox}),
+                      "" if px is None else f"{px:.2f}x"]
         cells += [f"{m.time_at[w]['median']:.1f}" for w in table.timing_sizes]
         cells += [_ours(table, c, m, n) for c in extra]
         cells.append(f"{m.time['p10']:.1f}-{m.time['p90']:.1f}")
@@ -133,22 +106,14 @@ def markdown(table, results: list, meta: dict, deltas: list[dict | None]) -> str
               "Speed-up: the baseline row's time "
               "(" + (", ".join(sorted({r.baseline for r in table.rows if r.baseline})) or "none")
               + ") over this row's, measured in the same run. " + _lpips_note(table, results)
-              + (_seeds_note(results[0].seeds, ratios) if n > 1 else ""), ""]
-    return "\n".join(lines)
+              + (_seeds_note(results[0].seeds) if n > 1 else ""), ""]
+    return "\n".join(lines + compare.markdown(claims))
 
 
-def _seeds_note(seed_list: list[int], ratios: bool) -> str:
-    n = len(seed_list)
-    note = (f"\n\nOurs: mean ± sample standard deviation over {n} training seeds "
+def _seeds_note(seed_list: list[int]) -> str:
+    return (f"\n\nOurs: mean ± sample standard deviation over {len(seed_list)} training seeds "
             f"({', '.join(map(str, seed_list))}); times, sizes and training minutes are means; "
             f"the sample renders are seed {seed_list[0]}'s.")
-    if ratios:
-        note += (" ΔPSNR vs baseline: this row's PSNR minus the baseline's trained with the "
-                 "same seed, mean ± standard deviation over the seeds; the paper's from its "
-                 f"PSNR column. Verdict: with N = {n} seeds, \"reproduces\" where |mean Δ| > "
-                 "2 × std(Δ) / √N and Δ has the paper's sign, \"opposite\" where it is beyond "
-                 "that with the other sign, \"within spread\" where |mean Δ| ≤ 2 × std(Δ) / √N.")
-    return note
 
 
 def _lpips_note(table, results: list) -> str:
@@ -210,7 +175,7 @@ def _spreads(table, m, stats: list[str]) -> dict | None:
     return {col: s for col, s in out.items() if s is not None}
 
 
-def _record(table, row, m, stats: list[str], speedup, effect, sample: str) -> dict:
+def _record(table, row, m, stats: list[str], speedup, sample: str) -> dict:
     """The JSON record of one row."""
     return {"row": row.name, "method": row.method, **row.model, **row.render,
             "PSNR": m.psnr, "SSIM": m.ssim, "time_ms": m.time, "wall_ms": m.wall_ms,
@@ -221,7 +186,7 @@ def _record(table, row, m, stats: list[str], speedup, effect, sample: str) -> di
             "baseline": row.baseline, "speedup": speedup, "sample": sample, "paper": row.paper,
             "seeds": m.seeds,
             "per_seed": None if m.per_seed is None else [p.to_json() for p in m.per_seed],
-            "spread": _spreads(table, m, stats), "delta_PSNR": effect}
+            "spread": _spreads(table, m, stats)}
 
 
 def _csv(table, records: list[dict], stats: list[str], n_seeds: int) -> str:
@@ -251,47 +216,74 @@ def write_table(out_dir: Path, table, results: list, meta: dict) -> str:
     ``results``: one :class:`bench.result.RowResult` per row (with its model's
     ``train_minutes`` and ``model_key``), or over several seeds one
     :func:`bench.seeds.aggregate` result per row (JSON rows then carry ``seeds``,
-    ``per_seed``, ``spread``, ``delta_PSNR``; the CSV ``PSNR_std`` and ``SSIM_std``).
+    ``per_seed``, ``spread``; the CSV ``PSNR_std`` and ``SSIM_std``). The JSON's
+    ``comparisons``: :func:`bench.compare.measure`.
     """
-    deltas = effects(table, results)
-    md = markdown(table, results, meta, deltas)
+    claims = compare.measure(table, results)
+    md = markdown(table, results, meta, claims)
     write_atomic(out_dir / f"{table.stem}.md", md)
     n, stats = _n_seeds(results), _stat_columns(table, results)
     records = []
-    for row, m, ox, d in zip(table.rows, results, speedups(table, results), deltas):
+    for row, m, ox in zip(table.rows, results, speedups(table, results)):
         sample = out_dir / table.stem / f"{slug(row.name)}.png"
         write_atomic(sample, iio.imwrite("<bytes>", (np.clip(m.sample, 0, 1) * 255 + 0.5)
                                          .astype(np.uint8), extension=".png"))
-        records.append(_record(table, row, m, stats, ox, d, str(sample.relative_to(out_dir))))
+        records.append(_record(table, row, m, stats, ox, str(sample.relative_to(out_dir))))
     write_atomic(out_dir / f"{table.stem}.json", json.dumps({**meta, "table": table.key,
                                                              "title": table.title,
                                                              "paper_source": table.paper_source,
-                                                             "rows": records}, indent=2))
+                                                             "rows": records,
+                                                             "comparisons": claims}, indent=2))
     write_atomic(out_dir / f"{table.stem}.csv", _csv(table, records, stats, n))
     write_atomic(out_dir / f"{table.stem}.png", _plot(table, results))
     return md
 
 
 def write_index(out_dir: Path) -> None:
-    """OUT/README.md: every table with a ``OUT/<key>.json`` (in :func:`bench.ablation.list_tables`
-    order), each with the date, git revision, device, preset and scene of its own run, a link,
-    its plot and one sample render per row."""
-    lines = ["# clrender benchmark results", ""]
-    for key in map(ablation.file_stem, ablation.list_tables()):
-        path = out_dir / f"{key}.json"
-        if not path.is_file():
-            continue
-        try:
-            data = json.loads(path.read_text())
-            rows = [(r["row"], r["sample"]) for r in data["rows"]]
-            seed_list = data["rows"][0].get("seeds") or []
-            run = (f"{data['date']}, git {data['git_revision']}, {data['device']}, "
-                   f"`{data['preset']}` preset, {data['scene']} scene"
-                   + (f", {len(seed_list)} seeds" if len(seed_list) > 1 else "") + ".")
-            title = data["title"]
-        except (ValueError, KeyError, IndexError, TypeError) as exc:
-            raise ValueError(f"{path}: not a table written by bench.run ({exc!r})") from exc
-        lines += [f"## [{title}]({key}.md)", "", run, "", f"![quality vs time]({key}.png)", "",
+    """OUT/README.md: the summary of the paper's claims (:func:`bench.summary.summary`),
+    then every table with a ``OUT/<key>.json`` (in :func:`bench.ablation.list_tables`
+    order), each with the date, git revision, device, preset and scene of its own run, a
+    link, its plot and one sample render per row."""
+    lines = ["# clrender benchmark results", "", "## Summary", "", summary.summary(out_dir),
+             "## Tables", ""]
+    for key, data in summary.load(out_dir):
+        seed_list = data["rows"][0].get("seeds") or []
+        run = (f"{data['date']}, git {data['git_revision']}, {data['device']}, "
+               f"`{data['preset']}` preset, {data['scene']} scene"
+               + (f", {len(seed_list)} seeds" if len(seed_list) > 1 else "") + ".")
+        rows = [(r["row"], r["sample"]) for r in data["rows"]]
+        lines += [f"### [{data['title']}]({key}.md)", "", run, "",
+                  f"![quality vs time]({key}.png)", "",
                   " ".join(f"![{name}]({sample})" for name, sample in rows),
                   "", " | ".join(name for name, _ in rows), ""]
     write_atomic(out_dir / "README.md", "\n".join(lines))
+
+
+def main(argv=None) -> int:
+    """``python -m bench.report [--results DIR] [--readme README.md]``: rewrite DIR/README.md
+    (summary and index) from DIR's tables; with ``--readme`` copy the summary into that file
+    between its ``<!-- results:begin -->`` and ``<!-- results:end -->`` lines."""
+    import argparse
+    import sys
+
+    p = argparse.ArgumentParser(prog="python -m bench.report", description=main.__doc__)
+    p.add_argument("--results", type=Path, default=Path("results"),
+                   help="the folder bench.run wrote (default results/)")
+    p.add_argument("--readme", type=Path, default=None,
+                   help="a Markdown file to copy the summary into, between the markers")
+    args = p.parse_args(argv)
+    try:
+        if not args.results.is_dir():
+            raise ValueError(f"{args.results}: no such folder (run `python -m bench.run` first)")
+        write_index(args.results)
+        if args.readme is not None:
+            changed = summary.copy_into(args.readme, summary.summary(args.results))
+            print(f"{args.readme}: summary {'updated' if changed else 'unchanged'}")
+    except (ValueError, OSError) as exc:
+        print(f"bench.report: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -103,8 +103,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--repeats", type=int, default=5, help="timing passes per row")
     p.add_argument("--seed", type=int, default=0, help="training seed (the first one)")
     p.add_argument("--seeds", type=whole_number("seeds"), default=1,
-                   help="train and measure every row for seeds SEED..SEED+N-1 and report "
-                        "mean ± std (default 1)")
+                   help="train and measure every row for seeds SEED..SEED+N-1 (fixed before "
+                        "the run) and report mean ± std and the paper's claims' verdicts "
+                        "(default 1)")
     return p
 
 

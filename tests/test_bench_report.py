@@ -1,11 +1,11 @@
 """Ablation specs and the benchmark report writer (no training: measured values given)."""
 import json
-from dataclasses import replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 import pytest
 
-from bench import ablation, report, seeds
+from bench import ablation, compare, report, seeds, summary
 from bench.result import RowResult
 from clrender import methods
 
@@ -20,6 +20,33 @@ def test_tables_load(key):
 def test_table4_rows_pair_G_off_and_on():
     t = ablation.load_table("table4")
     assert [(r.model["L"], r.render["use_G"]) for r in t.rows] == [(L, g) for L in (2, 3, 4) for g in (False, True)]
+
+
+@pytest.mark.parametrize("preset", methods.get("ndrf").PRESETS)
+def test_ndrf_table3_single_surface_is_the_full_models_outer_one(preset):
+    """At every preset the single-surface row changes the surface count alone."""
+    t = ablation.load_table("ndrf-table3")
+    spec = {r.name: methods.get("ndrf").model_spec(
+        preset, **{k: v for k, v in r.model.items() if k != "teacher"}) for r in t.rows}
+    full, single = spec["Full (duplex + conv + distill)"], spec["Single surface (outer)"]
+    assert t.rows[-1].model == {"teacher": t.rows[0].model["teacher"]}   # the preset's own
+    assert len(full["model"]["thresholds"]) == 2
+    assert single["model"]["thresholds"] == full["model"]["thresholds"][:1]
+    assert {**single, "model": {**single["model"], "thresholds": None}} == \
+        {**full, "model": {**full["model"], "thresholds": None}}
+
+
+@pytest.mark.parametrize("preset, same_as", [("cpu", "1e-2"), ("tiny", "1e-4")])
+def test_ndrf_table3_single_surface_shares_the_thresholds_tables_models(tmp_path, preset,
+                                                                       same_as):
+    """The README quotes the thresholds table's row for Table 3's single surface: one model."""
+    from bench import cache
+
+    single = ablation.load_table("ndrf-table3").rows[0]
+    row = next(r for r in ablation.load_table("ndrf-thresholds").rows if r.name == same_as)
+    keys = [cache.plan_model(tmp_path, tmp_path, "fp", preset, "ndrf", r.model).key
+            for r in (single, row)]
+    assert keys[0] == keys[1]
 
 
 def test_unknown_table_lists_the_known_ones():
@@ -62,11 +89,11 @@ def test_lpips_is_reported_beside_the_paper_or_as_not_measured(tmp_path):
     t = ablation.load_table("table2")
     meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4"}
     results = [_measured(25.0, 5.0)] * 3
-    md = report.markdown(t, results, meta, report.effects(t, results))
+    md = report.markdown(t, results, meta, compare.measure(t, results))
     row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
     assert "| n/a | 0.299 |" in row and "LPIPS: n/a where its weights" in md
     results = [_measured(25.0, 5.0, lpips=0.2)] * 3
-    md = report.markdown(t, results, meta, report.effects(t, results))
+    md = report.markdown(t, results, meta, compare.measure(t, results))
     row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
     assert "| 0.200 | 0.299 |" in row and "LPIPS: AlexNet, linear heads v0.1" in md
 
@@ -105,6 +132,39 @@ def test_unknown_baseline_and_column_are_errors(tmp_path, monkeypatch):
     assert ablation.load_table("bad").paper_columns == ("PSNR", "March (ms)", "Occupied")
 
 
+@pytest.mark.parametrize("compare, error", [
+    ('[{ against = "nope" }]', "against 'nope' is not another row"),
+    ('[{ against = "a" }]', "against 'a' is not another row"),
+    ('[{ against = "b", claim = "better" }]', "claim 'better' is none of"),
+    ('[{ against = "b", claim = "equivalent" }]', "a margin .dB. is for claim"),
+    ('[{ against = "b", margin = 0.3 }]', "a margin .dB. is for claim"),
+    ('[{ against = "b", claim = "equivalent", margin = -1 }]', "margin -1 must be a number"),
+    ('[{ against = "b", within = 1 }]', "unknown keys .'within'."),
+    ('"b"', "takes a list of tables"),
+])
+def test_bad_comparisons_are_errors_naming_the_file(tmp_path, monkeypatch, compare, error):
+    monkeypatch.setattr(methods.get("ngprt"), "ABLATIONS", tmp_path)
+    (tmp_path / "bad.toml").write_text(
+        'title = "t"\npaper_source = "p"\nscene = "builtin-bounded"\npreset = "cpu"\n'
+        'paper_columns = ["PSNR"]\nbaseline = "b"\n'
+        f'[[rows]]\nname = "a"\nmodel = {{ L = 2 }}\ncompare = {compare}\n'
+        '[[rows]]\nname = "b"\nmodel = { L = 3 }\n')
+    with pytest.raises(ValueError, match=f"bad.toml: row 'a': compare.*{error}"):
+        ablation.load_table("bad")
+
+
+def test_declared_comparisons_replace_those_of_the_baseline(tmp_path, monkeypatch):
+    monkeypatch.setattr(methods.get("ngprt"), "ABLATIONS", tmp_path)
+    rows = "".join(f'[[rows]]\nname = "{n}"\nmodel = {{ L = 2 }}\n' for n in "abc")
+    head = ('title = "t"\npaper_source = "p"\nscene = "builtin-bounded"\npreset = "cpu"\n'
+            'paper_columns = ["PSNR"]\nbaseline = "a"\n')
+    (tmp_path / "t.toml").write_text(head + rows)
+    assert [(c.row, c.against) for c in ablation.load_table("t").comparisons] == \
+        [("b", "a"), ("c", "a")]
+    (tmp_path / "t.toml").write_text(head + rows + 'compare = [{ against = "b" }]\n')
+    assert [(c.row, c.against) for c in ablation.load_table("t").comparisons] == [("c", "b")]
+
+
 def test_tables_are_keyed_by_method_and_name(tmp_path, monkeypatch):
     """Two methods' `table4`: each asked for as method/name, their files apart."""
     monkeypatch.setattr(methods.get("ndrf"), "ABLATIONS", tmp_path)
@@ -138,11 +198,12 @@ def test_a_table_may_mix_methods(tmp_path):
     assert data["rows"][1]["Marching"] is None and data["rows"][1]["Coverage"] == 0.5
 
 
-def _two_seeds(t, psnrs: dict) -> list[dict]:
-    """Per row of ``t``: the aggregate of two fake seeds with the given PSNRs."""
+def _seeds(t, psnrs: dict) -> list[dict]:
+    """Per row of ``t``: the aggregate of fake seeds 0, 1, ... with the given PSNRs."""
+    n = len(next(iter(psnrs.values())))
     return [seeds.aggregate([_measured(p, 10.0 + i + s, lpips=0.2 + 0.01 * s,
                                        stages={"intersect": 1.0 + s})
-                             for s, p in enumerate(psnrs[r.name])], [0, 1])
+                             for s, p in enumerate(psnrs[r.name])], list(range(n)))
             for i, r in enumerate(t.rows)]
 
 
@@ -151,32 +212,94 @@ def _cells(md: str, row: str) -> list[str]:
     return [c.strip() for c in line.strip("|").split("|")]
 
 
-def test_two_seeds_give_mean_spread_and_a_verdict(tmp_path):
+META = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4", "git_revision": "r",
+        "date": "d"}
+
+
+def test_seeds_give_mean_spread_and_the_claims_verdicts(tmp_path):
     t = ablation.load_table("table2")      # paper: L=3 +0.29 dB over L=2, L=4 +0.41 dB
-    results = _two_seeds(t, {"NGP-RT (L=2)": [20.0, 20.2],
-                             "NGP-RT (L=3)": [21.0, 21.4],    # +1.0, +1.2: beyond 0.2
-                             "NGP-RT (L=4)": [19.0, 19.4]})   # -1.0, -0.8: beyond 0.2
-    meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4",
-            "git_revision": "r", "date": "d"}
-    md = report.write_table(tmp_path, t, results, meta)
+    results = _seeds(t, {"NGP-RT (L=2)": [20.0, 20.2, 20.1],
+                         "NGP-RT (L=3)": [21.0, 21.3, 21.1],    # +1.0, +1.1, +1.0
+                         "NGP-RT (L=4)": [19.0, 19.3, 19.0]})   # -1.0, -0.9, -1.1
+    md = report.write_table(tmp_path, t, results, META)
     head = _cells(md, "Row")
-    assert head[11:16] == ["Speed-up", "Speed-up (paper)", "ΔPSNR vs baseline", "ΔPSNR (paper)",
-                           "Verdict"]
+    assert head[11:13] == ["Speed-up", "Speed-up (paper)"] and "Verdict" not in head
     base, l3, l4 = (_cells(md, r.name) for r in t.rows)
-    assert base[1:3] == ["20.10 ± 0.14", "25.64"] and base[5:7] == ["0.205 ± 0.007", "0.299"]
-    assert base[7] == "10.5 ± 0.7" and base[13:16] == ["", "", ""]
-    assert l3[13:16] == ["+1.10 ± 0.14", "+0.29", "reproduces"]
-    assert l4[13:16] == ["-0.90 ± 0.14", "+0.41", "opposite"]
-    assert "over 2 training seeds (0, 1)" in md and "|mean Δ| > 2 × std(Δ) / √N" in md
+    assert base[1:3] == ["20.10 ± 0.10", "25.64"] and base[5:7] == ["0.210 ± 0.010", "0.299"]
+    assert base[7] == "11.0 ± 1.0" and l3[11:13] == ["0.92x", "0.74x"]     # 11 / 12 ms
+    # mean 1.033, std 0.0577: 95% interval 1.033 ± 4.303 * 0.0577 / sqrt(3) = ± 0.143
+    assert _cells(md, "NGP-RT (L=3) − NGP-RT (L=2)") == [
+        "NGP-RT (L=3) − NGP-RT (L=2)", "difference", "+1.03 ± 0.06", "[+0.89, +1.18] (95%)",
+        "+0.29", "reproduces", "0.92x", "0.74x"]
+    assert _cells(md, "NGP-RT (L=4) − NGP-RT (L=2)")[2:6] == [
+        "-1.00 ± 0.10", "[-1.25, -0.75] (95%)", "+0.41", "opposite"]
+    assert "over 3 training seeds (0, 1, 2)" in md and "no correction for the number" in md
     data = json.loads((tmp_path / "table2.json").read_text())
     row = data["rows"][1]
-    assert row["seeds"] == [0, 1] and [p["PSNR"] for p in row["per_seed"]] == [21.0, 21.4]
-    assert row["spread"]["PSNR"] == {"std": pytest.approx(0.4 / 2 ** 0.5), "min": 21.0,
-                                     "max": 21.4}
-    assert row["delta_PSNR"]["verdict"] == "reproduces" and data["rows"][0]["delta_PSNR"] is None
+    assert row["seeds"] == [0, 1, 2] and [p["PSNR"] for p in row["per_seed"]] == [21.0, 21.3, 21.1]
+    assert row["spread"]["PSNR"]["std"] == pytest.approx(np.std([21.0, 21.3, 21.1], ddof=1))
+    claim = data["comparisons"][0]
+    assert (claim["row"], claim["against"], claim["verdict"], claim["n"]) == \
+        ("NGP-RT (L=3)", "NGP-RT (L=2)", "reproduces", 3)
+    assert claim["lo"] == pytest.approx(1.0333 - 0.1434, abs=1e-3)
     csv_lines = (tmp_path / "table2.csv").read_text().splitlines()
     assert csv_lines[0].split(",")[4:8] == ["PSNR", "SSIM", "PSNR_std", "SSIM_std"]
-    assert csv_lines[2].split(",")[4:8] == ["21.2000", "0.8000", "0.2828", "0.0000"]
+    assert csv_lines[2].split(",")[4:8] == ["21.1333", "0.8000", "0.1528", "0.0000"]
+
+
+def test_an_underpowered_claim_says_how_many_seeds_would_resolve_it():
+    t = ablation.load_table("table2")
+    results = _seeds(t, {"NGP-RT (L=2)": [20.0, 20.2], "NGP-RT (L=3)": [21.0, 21.4],
+                         "NGP-RT (L=4)": [20.0, 20.2]})
+    l3, l4 = compare.measure(t, results)
+    # +1.0, +1.2 over 2 seeds: half-width 12.7 * 0.141 / sqrt(2) = 1.27 > 1.1 and > 0.29
+    assert l3["verdict"] == "underpowered" and l3["seeds_needed"] == seeds.seeds_to_resolve(
+        0.29, l3["std"]) == 4
+    assert compare.verdict_cell(l3) == "underpowered (4 seeds would resolve it)"
+    assert l4["std"] == 0.0 and l4["verdict"] == "within spread"   # no difference, no spread
+    one = compare.measure(t, [_measured(20.0 + i, 10.0) for i in range(3)])
+    assert [(c["mean"], c["std"], compare.verdict_cell(c)) for c in one] == \
+        [(1.0, None, "one seed: no verdict"), (2.0, None, "one seed: no verdict")]
+
+
+def test_table3_claims_are_the_papers():
+    """Separate-Att (V) beats each light aggregation and is comparable to MLP (§5.2)."""
+    t = ablation.load_table("table3")
+    light = ["SUM", "Shared-Att (Inv)", "Separate-Att (Inv)", "Shared-Att (V)"]
+    assert [(c.row, c.against, c.claim, c.margin) for c in t.comparisons] == \
+        [("Separate-Att (V)", a, "difference", None) for a in light] \
+        + [("Separate-Att (V)", "MLP", "equivalent", 0.3)]
+    psnr = {"MLP": [26.0, 26.1, 26.2], "SUM": [25.0, 25.2, 25.1],
+            "Shared-Att (Inv)": [26.0, 26.1, 26.4], "Separate-Att (Inv)": [25.5, 25.7, 25.6],
+            "Shared-Att (V)": [26.2, 26.3, 26.4], "Separate-Att (V)": [25.95, 26.1, 26.15]}
+    claims = compare.measure(t, _seeds(t, psnr))
+    assert [round(c["paper"], 2) for c in claims] == [0.54, 0.36, 0.32, 0.16, -0.17]
+    assert [c["verdict"] for c in claims] == ["reproduces", "within spread", "reproduces",
+                                              "opposite", "equivalent"]
+    mlp = claims[-1]                  # -0.05, 0.0, -0.05: 90% interval inside ±0.3
+    assert mlp["confidence"] == 0.90 and -0.3 < mlp["lo"] < mlp["hi"] < 0.3
+    assert mlp["speedup_paper"] == pytest.approx(68.02 / 16.17)
+    assert mlp["speedup"] == {"ratio": pytest.approx(11.0 / 16.0)}   # MLP row 0, SepV row 5
+
+
+@dataclass(frozen=True)
+class _Paired(RowResult):
+    """A result carrying the speed-up interval of interleaved timing pairs against its
+    baseline (the field bench.measure fills where it times pairs)."""
+
+    paired_speedup: dict | None = None
+
+
+def test_a_paired_speedup_interval_is_printed_where_a_result_carries_one(tmp_path):
+    t = ablation.load_table("table3")
+    results = [_measured(26.0, 10.0) for _ in t.rows]
+    results[-1] = _Paired(**{f.name: getattr(results[-1], f.name) for f in fields(RowResult)},
+                          paired_speedup={"ratio": 4.05, "lo": 3.9, "hi": 4.2, "n": 20})
+    md = report.write_table(tmp_path, t, results, META)
+    assert "| 4.05x (3.90-4.20, 20 pairs) | 4.21x |" in next(
+        l for l in md.splitlines() if l.startswith("| Separate-Att (V) |"))
+    assert _cells(md, "Separate-Att (V) − MLP")[6] == "4.05x (3.90-4.20, 20 pairs)"
+    assert _cells(md, "Separate-Att (V) − SUM")[6] == "1.00x"   # not the pairs' baseline
 
 
 def test_index_lists_every_table_written_with_its_own_run(tmp_path):
@@ -189,7 +312,7 @@ def test_index_lists_every_table_written_with_its_own_run(tmp_path):
     report.write_index(tmp_path)
     text = (tmp_path / "README.md").read_text()
     assert "(ndrf-thresholds.md)" in text and "ndrf-table3" not in text
-    report.write_table(tmp_path, t3, _two_seeds(t3, {r.name: [20.0, 21.0] for r in t3.rows}),
+    report.write_table(tmp_path, t3, _seeds(t3, {r.name: [20.0, 21.0] for r in t3.rows}),
                        {**meta, "device": "dev B", "git_revision": "r2", "preset": "tiny"})
     (tmp_path / "not-a-table.json").write_text("{}")
     report.write_index(tmp_path)
@@ -201,3 +324,47 @@ def test_index_lists_every_table_written_with_its_own_run(tmp_path):
     assert "2026-01-01, git r1, dev A, `cpu` preset, builtin-bounded scene." in text[second:]
     assert "![Duplex (1e-4, 1e-2)](ndrf-thresholds/duplex-1e-4-1e-2.png)" in text
     assert "not-a-table" not in text
+
+
+def test_the_summary_has_each_claim_and_is_copied_between_the_markers(tmp_path):
+    t = ablation.load_table("table2")
+    results = _seeds(t, {"NGP-RT (L=2)": [20.0, 20.2, 20.1], "NGP-RT (L=3)": [21.0, 21.3, 21.1],
+                         "NGP-RT (L=4)": [19.0, 19.3, 19.0]})
+    out = tmp_path / "results"
+    report.write_table(out, t, results, META)
+    report.write_index(out)
+    index = (out / "README.md").read_text()
+    assert index.index("## Summary") < index.index("### Table 2") < index.index("## Tables")
+    assert ("| NGP-RT (L=3) − NGP-RT (L=2) | +1.03 ± 0.06 [+0.89, +1.18] | +0.29 | 0.92x | "
+            "0.74x | reproduces |") in index
+    assert "3 seeds, `cpu` preset, s scene, d, d, git r." in index
+    readme = tmp_path / "README.md"
+    readme.write_text(f"# x\n\n## Results\nintro\n{summary.BEGIN}\nold\n{summary.END}\nafter\n")
+    assert report.main(["--results", str(out), "--readme", str(readme)]) == 0
+    text = readme.read_text()
+    assert text.startswith("# x\n\n## Results\nintro\n") and text.endswith(f"{summary.END}\nafter\n")
+    assert "old" not in text and summary.summary(out).strip() in text
+    assert summary.copy_into(readme, summary.summary(out)) is False      # unchanged: not written
+
+
+def test_summary_errors_name_the_file(tmp_path, capsys):
+    readme = tmp_path / "README.md"
+    readme.write_text("no markers\n")
+    with pytest.raises(ValueError, match="README.md: expected one <!-- results:begin -->"):
+        summary.copy_into(readme, "x")
+    (tmp_path / "table2.json").write_text(json.dumps({"title": "t", "rows": [{}]}))
+    with pytest.raises(ValueError, match="table2.json: not a table written by bench.run"):
+        summary.summary(tmp_path)
+    assert report.main(["--results", str(tmp_path / "none")]) == 2
+    assert "none: no such folder" in capsys.readouterr().err
+    assert summary.summary(tmp_path / "none").startswith("No table has been run into")
+
+
+def test_the_projects_readme_takes_the_summary(tmp_path):
+    from pathlib import Path
+
+    readme = tmp_path / "README.md"
+    readme.write_text((Path(__file__).resolve().parents[1] / "README.md").read_text())
+    assert summary.copy_into(readme, "generated") is True
+    text = readme.read_text()
+    assert f"{summary.BEGIN}\ngenerated\n{summary.END}" in text and "## Usage" in text

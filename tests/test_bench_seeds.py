@@ -51,16 +51,64 @@ def test_paired_delta_pairs_the_same_seed():
         seeds.paired_delta([21.0, 22.0], [20.0])
 
 
+def test_half_width_and_interval_are_the_t_interval_with_n_minus_1_degrees_of_freedom():
+    # t quantiles from a printed table: t_0.975 with 2 / 3 degrees of freedom 4.3027 / 3.1824,
+    # t_0.95 with 2: 2.9200.
+    assert seeds.half_width(0.14, 3) == pytest.approx(4.3027 * 0.14 / math.sqrt(3), abs=1e-4)
+    assert seeds.interval(1.0, 0.5, 4) == pytest.approx((1 - 3.1824 / 4, 1 + 3.1824 / 4), abs=1e-4)
+    assert seeds.half_width(0.1, 3, 0.90) == pytest.approx(2.9200 * 0.1 / math.sqrt(3), abs=1e-4)
+    with pytest.raises(ValueError, match="two or more paired seeds, got n = 1"):
+        seeds.half_width(0.1, 1)
+
+
 @pytest.mark.parametrize("paper, mean, std, n, expected", [
-    (0.3, 1.5, 0.5, 3, "reproduces"),       # 1.5 > 2 * 0.5 / sqrt(3) = 0.577
-    (-0.3, 1.5, 0.5, 3, "opposite"),
-    (0.3, -1.5, 0.5, 3, "opposite"),
-    (-0.3, -1.5, 0.5, 3, "reproduces"),
-    (0.3, 0.1, 0.3, 3, "within spread"),    # 0.1 <= 0.346
-    (0.3, 2.0, 2.0, 4, "within spread"),    # on the threshold 2 * 2 / 2 = 2: within
-    (0.3, 2.01, 2.0, 4, "reproduces"),
-    (0.3, 0.01, 0.0, 2, "reproduces"),      # no spread: any difference is beyond it
-    (None, 1.5, 0.5, 3, ""),                # the paper gives no difference
+    (0.36, 0.32, 0.14, 3, "within spread"),   # t = 3.96 < 4.30; half-width 0.348 < 0.36
+    (0.36, 0.32, 0.05, 3, "reproduces"),      # half-width 0.124
+    (-0.36, 0.32, 0.05, 3, "opposite"),
+    (0.36, -0.32, 0.05, 3, "opposite"),
+    (-0.36, -0.32, 0.05, 3, "reproduces"),
+    (0.17, 0.19, 0.08, 3, "underpowered"),    # half-width 0.199 > 0.17, and > 0.19
+    (0.17, 0.25, 0.08, 3, "reproduces"),      # significant: reported as such, power aside
+    (-0.17, 0.25, 0.08, 3, "opposite"),
+    (1.0, 3.1824 * 0.5 / 2 - 1e-4, 0.5, 4, "within spread"),   # just inside the interval
+    (1.0, 3.1824 * 0.5 / 2 + 1e-4, 0.5, 4, "reproduces"),      # just outside
+    (0.3, 0.01, 0.0, 2, "reproduces"),        # no spread: any difference is resolved
+    (0.3, 0.0, 0.0, 3, "within spread"),
+    (None, 1.5, 0.5, 3, ""),                  # the paper gives no difference
+    (0.0, 1.5, 0.5, 3, ""),
 ])
 def test_verdict(paper, mean, std, n, expected):
     assert seeds.verdict(paper, mean, std, n) == expected
+
+
+def test_verdict_needs_two_seeds():
+    with pytest.raises(ValueError, match="two or more paired seeds"):
+        seeds.verdict(0.3, 1.0, 0.0, 1)
+
+
+def test_seeds_to_resolve_is_the_smallest_n_whose_interval_is_narrower_than_the_effect():
+    assert seeds.seeds_to_resolve(0.36, 0.14) == 3      # 0.348 < 0.36 already at n = 3
+    assert seeds.seeds_to_resolve(0.17, 0.08) == 4      # n = 3: 0.199; n = 4: 0.127
+    assert seeds.seeds_to_resolve(-0.17, 0.08) == 4     # the size of the effect counts
+    assert seeds.seeds_to_resolve(0.3, 0.0) == 2
+    for effect, std in ((0.17, 0.08), (0.05, 0.4), (0.3, 0.2)):
+        n = seeds.seeds_to_resolve(effect, std)
+        assert seeds.half_width(std, n) < effect
+        assert n == 2 or seeds.half_width(std, n - 1) >= effect
+    assert seeds.seeds_to_resolve(0.0, 0.1) is None and seeds.seeds_to_resolve(None, 0.1) is None
+    assert seeds.seeds_to_resolve(1e-4, 1.0, limit=1000) is None   # beyond the limit
+
+
+@pytest.mark.parametrize("mean, std, n, expected", [
+    (-0.05, 0.1, 3, "equivalent"),            # 90% interval -0.05 ± 0.169 inside ±0.3
+    (0.2, 0.1, 3, "not shown equivalent"),    # 0.2 + 0.169 > 0.3
+    (0.0, 0.2, 3, "underpowered"),            # half-width 0.337 >= 0.3: no mean could show it
+    (0.0, 0.2, 8, "equivalent"),              # the same spread over more seeds
+])
+def test_equivalence_is_two_one_sided_tests(mean, std, n, expected):
+    assert seeds.equivalence(mean, std, n, margin=0.3) == expected
+
+
+def test_equivalence_needs_a_positive_margin():
+    with pytest.raises(ValueError, match="margin must be > 0"):
+        seeds.equivalence(0.0, 0.1, 3, margin=0.0)

@@ -26,6 +26,8 @@ TRAIN_OPTIONS = {
     "kernel_size": Option(int, None, "shader conv kernel side (2: the paper's; 1: an MLP)",
                           choices=(1, 2)),
     "distill": Option(bool, True, "first half of training on teacher renderings"),
+    "outer_only": Option(bool, False, "only the outer (first) mesh of the thresholds: one "
+                         "surface, as NDRF Table 3's single-surface row"),
 }
 TEACHER = Teacher("teacher", "ngprt")
 ABLATIONS = Path(__file__).resolve().parent / "ablations"

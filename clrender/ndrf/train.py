@@ -46,7 +46,7 @@ from .view_memory import view_budget as resolve_view_budget
 F32 = np.float32
 
 # The options a benchmark row may set, and their types.
-MODEL_OPTIONS = {"thresholds": list, "kernel_size": int, "distill": bool}
+MODEL_OPTIONS = {"thresholds": list, "kernel_size": int, "distill": bool, "outer_only": bool}
 
 
 @dataclass(frozen=True)
@@ -102,8 +102,9 @@ TRAIN_PRESETS: dict[str, TrainConfig] = {
 def configs(preset: str, iterations: int | None = None, train_config: TrainConfig | None = None,
             **options):
     """``(NDRFConfig, TrainConfig, mesh.ExtractConfig)`` of ``preset`` with the model options
-    (``thresholds``, ``kernel_size``, ``distill``) and an iteration count applied;
-    ``train_config`` replaces the preset's training config."""
+    (``thresholds``, ``kernel_size``, ``distill``, ``outer_only``: the thresholds' first,
+    outer, one alone) and an iteration count applied; ``train_config`` replaces the
+    preset's training config."""
     unknown = sorted(set(options) - set(MODEL_OPTIONS))
     if unknown:
         raise ValueError(f"unknown NDRF options {unknown}; expected {sorted(MODEL_OPTIONS)}")
@@ -111,6 +112,8 @@ def configs(preset: str, iterations: int | None = None, train_config: TrainConfi
         raise ValueError(f"unknown preset {preset!r}; presets: {sorted(TRAIN_PRESETS)}")
     cfg = ndrf_preset(preset, **{k: options[k] for k in ("thresholds", "kernel_size")
                                  if options.get(k) is not None})
+    if options.get("outer_only"):
+        cfg = replace(cfg, thresholds=cfg.thresholds[:1])
     tcfg = train_config or TRAIN_PRESETS[preset]
     if options.get("distill") is not None:
         tcfg = replace(tcfg, distill=bool(options["distill"]))
@@ -221,7 +224,7 @@ def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None
             Default: ``$CLRENDER_NDRF_VIEW_BUDGET``, else half the memory available
             (:func:`clrender.ndrf.view_memory.view_budget`). Not part of the run's config:
             it changes neither the results nor whether a run resumes.
-        **options: :data:`MODEL_OPTIONS` (thresholds, kernel_size, distill).
+        **options: :data:`MODEL_OPTIONS` (thresholds, kernel_size, distill, outer_only).
     An existing run with the same config.json is resumed (meshes, distillation views and
     checkpoint reused). Returns the run folder.
     """
