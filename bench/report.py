@@ -242,15 +242,18 @@ def write_table(out_dir: Path, table, results: list, meta: dict) -> str:
 def write_index(out_dir: Path) -> None:
     """OUT/README.md: the summary of the paper's claims (:func:`bench.summary.summary`),
     then every table with a ``OUT/<key>.json`` (in :func:`bench.ablation.list_tables`
-    order), each with the date, git revision, device, preset and scene of its own run, a
-    link, its plot and one sample render per row."""
+    order), each with the date, git revision, device, preset and scene of its own run, the
+    code fingerprint of each method that trained its models, a link, its plot and one
+    sample render per row."""
     lines = ["# clrender benchmark results", "", "## Summary", "", summary.summary(out_dir),
              "## Tables", ""]
     for key, data in summary.load(out_dir):
         seed_list = data["rows"][0].get("seeds") or []
+        code = ", ".join(f"{m} {fp}" for m, fp in data.get("code", {}).items())
         run = (f"{data['date']}, git {data['git_revision']}, {data['device']}, "
                f"`{data['preset']}` preset, {data['scene']} scene"
-               + (f", {len(seed_list)} seeds" if len(seed_list) > 1 else "") + ".")
+               + (f", {len(seed_list)} seeds" if len(seed_list) > 1 else "")
+               + (f"; trained by code {code} (bench/fingerprint.py)" if code else "") + ".")
         rows = [(r["row"], r["sample"]) for r in data["rows"]]
         lines += [f"### [{data['title']}]({key}.md)", "", run, "",
                   f"![quality vs time]({key}.png)", "",

@@ -313,14 +313,15 @@ def test_index_lists_every_table_written_with_its_own_run(tmp_path):
     text = (tmp_path / "README.md").read_text()
     assert "(ndrf-thresholds.md)" in text and "ndrf-table3" not in text
     report.write_table(tmp_path, t3, _seeds(t3, {r.name: [20.0, 21.0] for r in t3.rows}),
-                       {**meta, "device": "dev B", "git_revision": "r2", "preset": "tiny"})
+                       {**meta, "device": "dev B", "git_revision": "r2", "preset": "tiny",
+                        "code": {"ndrf": "c0de"}})
     (tmp_path / "not-a-table.json").write_text("{}")
     report.write_index(tmp_path)
     text = (tmp_path / "README.md").read_text()
     first, second = text.index("## [NDRF Table 3"), text.index("## [NDRF supp. Table 2")
     assert first < second                              # ablation.list_tables() order
-    assert "2026-01-01, git r2, dev B, `tiny` preset, builtin-bounded scene, 2 seeds." \
-        in text[first:second]
+    assert ("2026-01-01, git r2, dev B, `tiny` preset, builtin-bounded scene, 2 seeds; trained "
+            "by code ndrf c0de (bench/fingerprint.py).") in text[first:second]
     assert "2026-01-01, git r1, dev A, `cpu` preset, builtin-bounded scene." in text[second:]
     assert "![Duplex (1e-4, 1e-2)](ndrf-thresholds/duplex-1e-4-1e-2.png)" in text
     assert "not-a-table" not in text
