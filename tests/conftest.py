@@ -1,5 +1,32 @@
-"""Shared fixtures."""
+"""Shared fixtures; with ``CLRENDER_TEST_WITH_TOY=1`` the toy method (tests/toymethod) is
+installed for the whole run, child processes included, as a third-party plug-in would be
+(tests/test_extra_plugin.py runs the shell's tests so)."""
+import os
+import sys
+import tempfile
+from pathlib import Path
+
 import pytest
+
+TESTS = Path(__file__).resolve().parent
+
+
+def install_toy(site: Path) -> None:
+    """Register tests/toymethod as an installed distribution on ``site`` (a dist-info with
+    its ``clrender.methods`` entry point)."""
+    dist = site / "clrender_toy-0.1.dist-info"
+    dist.mkdir(parents=True, exist_ok=True)
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: clrender-toy\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[clrender.methods]\ntoy = toymethod.method\n")
+
+
+def pytest_configure(config):
+    if os.environ.get("CLRENDER_TEST_WITH_TOY") == "1":
+        site = Path(tempfile.mkdtemp(prefix="clrender-toy-site-"))
+        install_toy(site)
+        paths = [str(site), str(TESTS)]
+        sys.path[:0] = paths
+        os.environ["PYTHONPATH"] = os.pathsep.join(paths + [os.environ.get("PYTHONPATH", "")])
 
 
 @pytest.fixture

@@ -18,6 +18,7 @@ import pytest
 
 import clrender
 from bench import run as bench_run
+from conftest import install_toy
 from clrender import cli, methods
 from clrender.camera import generate_rays
 from clrender.data import load_dataset, make_scene
@@ -31,10 +32,7 @@ TESTS = Path(__file__).resolve().parent
 def toy(tmp_path_factory):
     """The toy plug-in, registered like an installed package (dist-info entry point)."""
     site = tmp_path_factory.mktemp("site")
-    dist = site / "clrender_toy-0.1.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: clrender-toy\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text("[clrender.methods]\ntoy = toymethod.method\n")
+    install_toy(site)
     with pytest.MonkeyPatch.context() as mp:
         mp.syspath_prepend(str(TESTS))
         mp.syspath_prepend(str(site))
