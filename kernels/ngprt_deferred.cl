@@ -63,28 +63,29 @@ typedef float16 vfloat;
 
 #define LANE(v, lane) (((float *)&(v))[lane])
 
-/* Degree-4 real SH of a unit direction (encoding.sh4, same constants and order). */
+/* Degree-4 real SH of a unit direction (encoding.sh4, its constants SH_C0 .. SH_C10 and
+ * order). */
 inline void ngp_sh4(float3 d, float *out)
 {
     const float x = d.x, y = d.y, z = d.z;
     const float xy = x * y, xz = x * z, yz = y * z;
     const float x2 = x * x, y2 = y * y, z2 = z * z;
-    out[0] = 0.28209479177387814f;
-    out[1] = -0.48860251190291987f * y;
-    out[2] = 0.48860251190291987f * z;
-    out[3] = -0.48860251190291987f * x;
-    out[4] = 1.0925484305920792f * xy;
-    out[5] = -1.0925484305920792f * yz;
-    out[6] = 0.94617469575755997f * z2 - 0.31539156525251999f;
-    out[7] = -1.0925484305920792f * xz;
-    out[8] = 0.54627421529603959f * x2 - 0.54627421529603959f * y2;
-    out[9] = 0.59004358992664352f * y * (-3.0f * x2 + y2);
-    out[10] = 2.8906114426405538f * xy * z;
-    out[11] = 0.45704579946446572f * y * (1.0f - 5.0f * z2);
-    out[12] = 0.3731763325901154f * z * (5.0f * z2 - 3.0f);
-    out[13] = 0.45704579946446572f * x * (1.0f - 5.0f * z2);
-    out[14] = 1.4453057213202769f * z * (x2 - y2);
-    out[15] = 0.59004358992664352f * x * (-x2 + 3.0f * y2);
+    out[0] = SH_C0;
+    out[1] = -SH_C1 * y;
+    out[2] = SH_C1 * z;
+    out[3] = -SH_C1 * x;
+    out[4] = SH_C2 * xy;
+    out[5] = -SH_C2 * yz;
+    out[6] = SH_C3 * z2 - SH_C4;
+    out[7] = -SH_C2 * xz;
+    out[8] = SH_C5 * x2 - SH_C5 * y2;
+    out[9] = SH_C6 * y * (-3.0f * x2 + y2);
+    out[10] = SH_C7 * xy * z;
+    out[11] = SH_C8 * y * (1.0f - 5.0f * z2);
+    out[12] = SH_C9 * z * (5.0f * z2 - 3.0f);
+    out[13] = SH_C8 * x * (1.0f - 5.0f * z2);
+    out[14] = SH_C10 * z * (x2 - y2);
+    out[15] = SH_C6 * x * (-x2 + 3.0f * y2);
 }
 
 /* max(x, 0) per lane; a select rather than fmax, which PoCL calls out of line. */

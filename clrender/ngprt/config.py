@@ -12,6 +12,8 @@ import math
 import numbers
 from dataclasses import asdict, dataclass, fields, replace
 
+from .encoding import SH_C
+
 VARIANTS = ("sum", "mlp", "shared-inv", "separate-inv", "shared-v", "separate-v")
 SCENES = ("bounded", "unbounded")
 N_MIP = 5                 # occupancy mip levels L_C, L_C/2, ..., L_C/16 (S2.5)
@@ -50,12 +52,14 @@ def kernel_constants() -> dict:
 
     Returns:
         ``{name: value}``: T_STOP, N_MIP, FEATURES, SH_DIM, DEFERRED_HIDDEN,
-        FUSION_HIDDEN, LATTICE_BREAKS and ``VARIANT_<NAME>`` (e.g. ``VARIANT_SEPARATE_V``) for each of
+        FUSION_HIDDEN, LATTICE_BREAKS, the SH constants ``SH_C<i>`` (float32) and
+        ``VARIANT_<NAME>`` (e.g. ``VARIANT_SEPARATE_V``) for each of
         :data:`VARIANTS` with its code from :data:`VARIANT_CODES`.
     """
     out = {"T_STOP": T_STOP, "N_MIP": N_MIP, "FEATURES": FEATURES, "SH_DIM": SH_DIM,
            "DEFERRED_HIDDEN": DEFERRED_HIDDEN, "FUSION_HIDDEN": FUSION_HIDDEN,
            "LATTICE_BREAKS": LATTICE_BREAKS}
+    out.update({f"SH_C{i}": float(c) for i, c in enumerate(SH_C)})
     for variant, code in VARIANT_CODES.items():
         out["VARIANT_" + variant.upper().replace("-", "_")] = code
     return out

@@ -11,6 +11,11 @@ from __future__ import annotations
 import numpy as np
 
 HASH_PRIMES = (1, 2654435761, 805459861)
+# The distinct magnitudes of the degree-4 SH basis (tiny-cuda-nn's), in order of first use:
+# the numpy, torch and OpenCL (-D SH_C0 .. SH_C10, config.kernel_constants) bases read them here.
+SH_C = (0.28209479177387814, 0.48860251190291987, 1.0925484305920792, 0.94617469575755997,
+        0.31539156525251999, 0.54627421529603959, 0.59004358992664352, 2.8906114426405538,
+        0.45704579946446572, 0.3731763325901154, 1.4453057213202769)
 
 
 def hash_corner(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray, T: int) -> np.ndarray:
@@ -29,21 +34,21 @@ def sh4(dirs: np.ndarray) -> np.ndarray:
     x2, y2, z2 = x * x, y * y, z * z
     f = np.float32
     out = [
-        np.full_like(x, f(0.28209479177387814)),
-        f(-0.48860251190291987) * y,
-        f(0.48860251190291987) * z,
-        f(-0.48860251190291987) * x,
-        f(1.0925484305920792) * xy,
-        f(-1.0925484305920792) * yz,
-        f(0.94617469575755997) * z2 - f(0.31539156525251999),
-        f(-1.0925484305920792) * xz,
-        f(0.54627421529603959) * x2 - f(0.54627421529603959) * y2,
-        f(0.59004358992664352) * y * (f(-3.0) * x2 + y2),
-        f(2.8906114426405538) * xy * z,
-        f(0.45704579946446572) * y * (f(1.0) - f(5.0) * z2),
-        f(0.3731763325901154) * z * (f(5.0) * z2 - f(3.0)),
-        f(0.45704579946446572) * x * (f(1.0) - f(5.0) * z2),
-        f(1.4453057213202769) * z * (x2 - y2),
-        f(0.59004358992664352) * x * (-x2 + f(3.0) * y2),
+        np.full_like(x, f(SH_C[0])),
+        f(-SH_C[1]) * y,
+        f(SH_C[1]) * z,
+        f(-SH_C[1]) * x,
+        f(SH_C[2]) * xy,
+        f(-SH_C[2]) * yz,
+        f(SH_C[3]) * z2 - f(SH_C[4]),
+        f(-SH_C[2]) * xz,
+        f(SH_C[5]) * x2 - f(SH_C[5]) * y2,
+        f(SH_C[6]) * y * (f(-3.0) * x2 + y2),
+        f(SH_C[7]) * xy * z,
+        f(SH_C[8]) * y * (f(1.0) - f(5.0) * z2),
+        f(SH_C[9]) * z * (f(5.0) * z2 - f(3.0)),
+        f(SH_C[8]) * x * (f(1.0) - f(5.0) * z2),
+        f(SH_C[10]) * z * (x2 - y2),
+        f(SH_C[6]) * x * (-x2 + f(3.0) * y2),
     ]
     return np.stack(out, axis=-1).astype(np.float32)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import torch
 
 from .config import LATTICE_BREAKS
-from .encoding import HASH_PRIMES
+from .encoding import HASH_PRIMES, SH_C
 
 # The 8 corner offsets of a cell, corner c = (c >> 2 & 1, c >> 1 & 1, c & 1) (x slowest).
 _CORNERS = [((c >> 2) & 1, (c >> 1) & 1, c & 1) for c in range(8)]
@@ -132,22 +132,22 @@ def sh4(dirs: torch.Tensor) -> torch.Tensor:
     xy, xz, yz = x * y, x * z, y * z
     x2, y2, z2 = x * x, y * y, z * z
     out = [
-        torch.full_like(x, 0.28209479177387814),
-        -0.48860251190291987 * y,
-        0.48860251190291987 * z,
-        -0.48860251190291987 * x,
-        1.0925484305920792 * xy,
-        -1.0925484305920792 * yz,
-        0.94617469575755997 * z2 - 0.31539156525251999,
-        -1.0925484305920792 * xz,
-        0.54627421529603959 * x2 - 0.54627421529603959 * y2,
-        0.59004358992664352 * y * (-3.0 * x2 + y2),
-        2.8906114426405538 * xy * z,
-        0.45704579946446572 * y * (1.0 - 5.0 * z2),
-        0.3731763325901154 * z * (5.0 * z2 - 3.0),
-        0.45704579946446572 * x * (1.0 - 5.0 * z2),
-        1.4453057213202769 * z * (x2 - y2),
-        0.59004358992664352 * x * (-x2 + 3.0 * y2),
+        torch.full_like(x, SH_C[0]),
+        -SH_C[1] * y,
+        SH_C[1] * z,
+        -SH_C[1] * x,
+        SH_C[2] * xy,
+        -SH_C[2] * yz,
+        SH_C[3] * z2 - SH_C[4],
+        -SH_C[2] * xz,
+        SH_C[5] * x2 - SH_C[5] * y2,
+        SH_C[6] * y * (-3.0 * x2 + y2),
+        SH_C[7] * xy * z,
+        SH_C[8] * y * (1.0 - 5.0 * z2),
+        SH_C[9] * z * (5.0 * z2 - 3.0),
+        SH_C[8] * x * (1.0 - 5.0 * z2),
+        SH_C[10] * z * (x2 - y2),
+        SH_C[6] * x * (-x2 + 3.0 * y2),
     ]
     return torch.stack(out, dim=-1)
 
