@@ -144,3 +144,15 @@ def test_platform_name_or_version_before_device_name():
     assert device.select_device("pocl") == pocl[0]
     if intel:  # PoCL's device names say "Intel(R) Xeon" too: the platform's name wins
         assert device.select_device("intel") == intel[0]
+
+
+def test_info_names_every_platform_and_why_it_chose(capsys, monkeypatch):
+    monkeypatch.delenv("CLRENDER_DEVICE", raising=False)
+    assert cli.main(["info"]) == 0
+    out = capsys.readouterr().out
+    for d in device.list_devices():
+        assert d.platform.name.strip() in out
+    chosen = device.select_device()
+    assert f"selected: {chosen.platform.name.strip()} / {chosen.name.strip()} " \
+           f"({device.choice_reason(chosen)})" in out
+    assert out.count("exact_build") == len(device.list_devices())
