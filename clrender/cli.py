@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 from . import cliopts, methods
@@ -30,7 +31,10 @@ def _cmd_info(args) -> int:
             if k not in ("platform", "platform_version"):
                 print(f"      {k:20s} {v}")
     if chosen is not None:
-        print(f"selected: {chosen.platform.name.strip()} / {chosen.name.strip()}")
+        how = (f"CLRENDER_DEVICE / --device {args.device or os.environ.get('CLRENDER_DEVICE')!r}"
+               if (args.device or os.environ.get("CLRENDER_DEVICE", "")).strip()
+               else device.choice_reason(chosen, devices))
+        print(f"selected: {chosen.platform.name.strip()} / {chosen.name.strip()} ({how})")
     return 0 if chosen is not None else 2
 
 

@@ -3,19 +3,22 @@
 The device is chosen by ``CLRENDER_DEVICE`` (or the ``device=`` argument of the
 public functions):
 
-* ``gpu`` / ``cpu`` / ``accelerator``: the first device of that type;
+* ``gpu`` / ``cpu`` / ``accelerator``: the best-ranked device of that type;
 * an integer ``N`` or ``P:D``: the N-th device in :func:`list_devices` order, or
   device D of platform P;
-* anything else: a case-insensitive substring of "platform name / device name".
+* anything else: a case-insensitive substring of the platform's name or version
+  ("intel", "pocl"), else of "platform name / device name".
 
-With nothing set, a GPU is preferred, then a CPU, then whatever exists (under
-Oclgrind the only device is the simulator); a device that cannot build a trivial kernel is
-passed over. When nothing matches, the error lists
-the devices that exist.
+With nothing set, the best-ranked device that builds a trivial kernel (:func:`rank`): a
+discrete GPU, then an integrated one, then a CPU, then an accelerator; within a kind the
+most compute units; then a system driver before a runtime clrender registered from pip
+(clrender/icd.py: Intel's CPU runtime is found without root or exported variables); then
+the platforms' order. :func:`choice_reason` says why. When nothing matches, the error
+lists the devices that exist.
 
 Programs are built from ``kernels/*.cl`` with ``-D`` specialisation and cached per
 (source text, options, device); kernels are fetched from a built program once. Each
-program has two builds: the exact one (:data:`EXACT_OPTIONS`, what the tests compare with
+program has two builds: the exact one (:func:`exact_options`, what the tests compare with
 the numpy references) and the fast one (:data:`FAST_OPTIONS`, for rendering).
 """
 from __future__ import annotations
@@ -26,11 +29,17 @@ from dataclasses import dataclass
 from importlib import resources
 
 import numpy as np
-import pyopencl as cl
 
-# Identical float results to the numpy references: no fused multiply-add, correctly
-# rounded division and sqrt (the references use IEEE float32 throughout); -D FAST_MATH=0.
-EXACT_OPTIONS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
+from . import icd
+
+icd.register()  # before the first platform query (see clrender/icd.py)
+import pyopencl as cl  # noqa: E402
+
+# Identical float results to the numpy references: no fused multiply-add (the kernels'
+# FP_CONTRACT OFF), correctly rounded division and sqrt (the references use IEEE float32
+# throughout); -D FAST_MATH=0. The option is passed only where the device reports
+# CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT (the spec allows it nowhere else): exact_options.
+CORRECTLY_ROUNDED = "-cl-fp32-correctly-rounded-divide-sqrt"
 # For rendering: the driver may contract a * b + c into a fused multiply-add and divide
 # and take sqrt within the OpenCL ulp bounds; -D FAST_MATH=1 lets a kernel use native_*
 # functions. Kernels that place positions or cells keep FP_CONTRACT OFF, so geometry is
@@ -62,15 +71,17 @@ class Runtime:
         Args:
             source_name: a file of ``kernels/``.
             defines: ``{name: value}`` passed as ``-D`` (bools as 0/1, floats as float32).
-            exact: the exact build (:data:`EXACT_OPTIONS`, ``-D FAST_MATH=0``), compared
-                with the numpy references in tests; False: the fast build
+            exact: the exact build (:func:`exact_options`, ``-D FAST_MATH=0``), compared
+                with the numpy references in tests (DeviceError where the device cannot
+                give IEEE float32 division and sqrt); False: the fast build
                 (:data:`FAST_OPTIONS`, ``-D FAST_MATH=1``) for rendering.
             source_dir: a folder to take the source and its headers from instead of the
                 installed ``kernels/`` (benchmarks compare kernel versions with it).
         """
         defines = {**(defines or {}), "FAST_MATH": not exact}
         opts = tuple(f"-D{k}={_define_value(v)}" for k, v in sorted(defines.items()))
-        return _build(self, source_name, (EXACT_OPTIONS if exact else FAST_OPTIONS) + opts,
+        base = exact_options(self.device) if exact else FAST_OPTIONS
+        return _build(self, source_name, base + opts,
                       None if source_dir is None else str(source_dir))
 
 
@@ -128,6 +139,60 @@ def _describe(devices: list[cl.Device]) -> str:
     return "\n".join(lines)
 
 
+def _kind(device: cl.Device) -> tuple[int, str]:
+    """(rank, name) of the device's kind: discrete GPU 0, integrated GPU 1 (it shares
+    the host's memory), CPU 2, accelerator 3, other 4."""
+    t = device_type_name(device)
+    if t == "GPU":
+        return (1, "integrated GPU") if device.host_unified_memory else (0, "discrete GPU")
+    return {"CPU": (2, "CPU"), "ACCELERATOR": (3, "accelerator")}.get(t, (4, "other"))
+
+
+def rank(devices: list[cl.Device]) -> list[cl.Device]:
+    """``devices`` best first: by kind (:func:`_kind`), then more compute units, then a
+    system driver before a runtime registered from pip (:mod:`clrender.icd`), then the
+    platforms' order."""
+    order = {id(d): i for i, d in enumerate(devices)}
+    return sorted(devices, key=lambda d: (_kind(d)[0], -d.max_compute_units,
+                                          icd.from_pip(d.platform.name) is not None,
+                                          order[id(d)]))
+
+
+def choice_reason(device: cl.Device, devices: list[cl.Device] | None = None) -> str:
+    """Why the default choice (no ``CLRENDER_DEVICE``) is ``device``: the rule that set
+    it apart from the runner-up, for ``clrender info``."""
+    ranked = [d for d in rank(devices if devices is not None else list_devices())
+              if d == device or _compiles(d)]
+    kind = _kind(device)[1]
+    others = [d for d in ranked if d != device]
+    if not others:
+        return f"the only device that builds kernels ({kind})"
+    nxt = others[0]
+    name = f"{nxt.platform.name.strip()} / {nxt.name.strip()}"
+    if _kind(nxt)[0] != _kind(device)[0]:
+        why = f"kind: {kind} before {_kind(nxt)[1]}"
+    elif nxt.max_compute_units != device.max_compute_units:
+        why = f"more compute units ({device.max_compute_units} against {nxt.max_compute_units})"
+    elif (icd.from_pip(nxt.platform.name) is None) != (icd.from_pip(device.platform.name) is None):
+        why = (f"same kind and compute units: the system's driver before "
+               f"{icd.from_pip(nxt.platform.name)} from pip")
+    else:
+        why = "same kind and compute units: the first in platform order"
+    skipped = [d for d in rank(devices or list_devices()) if d != device and not _compiles(d)]
+    note = (f"; skipped, cannot build kernels: "
+            + ", ".join(f"{d.platform.name.strip()} / {d.name.strip()}" for d in skipped)
+            if skipped else "")
+    return f"{why}; next: {name}{note}"
+
+
+def _matching(key: str, devices: list[cl.Device]) -> list[cl.Device]:
+    """Devices whose platform name or version contains ``key``, else whose
+    "platform / device" name does (lower-case ``key``)."""
+    on_platform = [d for d in devices
+                   if key in f"{d.platform.name} {d.platform.version}".lower()]
+    return on_platform or [d for d in devices if key in f"{d.platform.name} / {d.name}".lower()]
+
+
 def select_device(spec: str | None = None) -> cl.Device:
     """The device named by ``spec`` (or ``$CLRENDER_DEVICE``), see the module doc."""
     spec = spec if spec is not None else os.environ.get("CLRENDER_DEVICE", "")
@@ -138,14 +203,10 @@ def select_device(spec: str | None = None) -> cl.Device:
     types = {"gpu": cl.device_type.GPU, "cpu": cl.device_type.CPU,
              "accelerator": cl.device_type.ACCELERATOR}
     if not spec:
-        for t in (cl.device_type.GPU, cl.device_type.CPU):
-            for d in devices:
-                if d.type & t and _compiles(d):
-                    return d
-        return devices[0]
+        return next((d for d in rank(devices) if _compiles(d)), devices[0])
     key = spec.lower()
     if key in types:
-        match = [d for d in devices if d.type & types[key]]
+        match = rank([d for d in devices if d.type & types[key]])
     elif key.isdigit():
         match = [devices[int(key)]] if int(key) < len(devices) else []
     elif ":" in key and all(part.isdigit() for part in key.split(":", 1)):
@@ -154,8 +215,7 @@ def select_device(spec: str | None = None) -> cl.Device:
         match = ([platforms[p].get_devices()[i]]
                  if p < len(platforms) and i < len(platforms[p].get_devices()) else [])
     else:
-        match = [d for d in devices
-                 if key in f"{d.platform.name} / {d.name}".lower()]
+        match = _matching(key, devices)
     if not match:
         raise DeviceError(f"no OpenCL device matches {spec!r}; devices that exist:\n"
                           + _describe(devices))
@@ -173,6 +233,60 @@ def _compiles(device: cl.Device) -> bool:
         return True
     except cl.Error:
         return False
+
+
+_PROBE = """
+__kernel void probe(__global const float *a, __global const float *b, __global float *out)
+{
+    const int i = get_global_id(0);
+    out[2 * i] = a[i] / b[i];
+    out[2 * i + 1] = sqrt(a[i]);
+}
+"""
+
+
+def _probe_inputs(n: int = 1 << 16) -> tuple[np.ndarray, np.ndarray]:
+    """Positive float32 pairs over exponents -60..60 (normal results), fixed seed."""
+    rng = np.random.default_rng(0)
+    a = (rng.uniform(1, 2, n) * np.exp2(rng.integers(-60, 61, n))).astype(np.float32)
+    b = (rng.uniform(1, 2, n) * np.exp2(rng.integers(-60, 61, n))).astype(np.float32)
+    return a, b
+
+
+@functools.lru_cache(maxsize=None)
+def _divide_sqrt_mismatches(device: cl.Device) -> int:
+    """Probe results of ``a / b`` and ``sqrt(a)`` (built without any option) on
+    :func:`_probe_inputs` that differ from IEEE float32 (numpy's)."""
+    a, b = _probe_inputs()
+    ctx = cl.Context([device])
+    queue = cl.CommandQueue(ctx)
+    mf = cl.mem_flags
+    bufs = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=x) for x in (a, b)]
+    out = cl.Buffer(ctx, mf.WRITE_ONLY, 2 * a.nbytes)
+    kernel = cl.Kernel(cl.Program(ctx, _PROBE).build(), "probe")
+    kernel(queue, a.shape, None, *bufs, out)
+    got = np.empty(2 * len(a), np.float32)
+    cl.enqueue_copy(queue, got, out)
+    queue.finish()
+    return int(np.count_nonzero(got[0::2] != a / b) + np.count_nonzero(got[1::2] != np.sqrt(a)))
+
+
+def exact_options(device: cl.Device) -> tuple[str, ...]:
+    """Build options of the exact build on ``device``: :data:`CORRECTLY_ROUNDED` where the
+    device reports CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT; none where it does not but its
+    plain division and sqrt gave IEEE float32 results on every probe value (Intel's CPU
+    runtime: hardware divps / sqrtps); else DeviceError, as its builds cannot match the
+    numpy references."""
+    if device.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT:
+        return (CORRECTLY_ROUNDED,)
+    bad = _divide_sqrt_mismatches(device)
+    if bad:
+        raise DeviceError(
+            f"{device.platform.name.strip()} / {device.name.strip()}: cannot match the numpy "
+            f"references (exact build): it does not report correctly rounded division and sqrt "
+            f"(CL_DEVICE_SINGLE_FP_CONFIG) and {bad} of {2 * len(_probe_inputs()[0])} probe "
+            f"results differ from IEEE float32; render with the fast build (exact=False)")
+    return ()
 
 
 @functools.lru_cache(maxsize=None)
@@ -274,4 +388,19 @@ def device_info(device: cl.Device) -> dict:
         "max_alloc_MiB": device.max_mem_alloc_size >> 20,
         "local_mem_KiB": device.local_mem_size >> 10,
         "version": device.version.strip(),
+        "registered_by": (f"clrender (pip {icd.from_pip(device.platform.name)})"
+                          if icd.from_pip(device.platform.name) else "the ICD loader"),
+        "exact_build": _exact_build_note(device),
     }
+
+
+def _exact_build_note(device: cl.Device) -> str:
+    """How the exact build gets IEEE division and sqrt on ``device`` (or why it cannot)."""
+    if not _compiles(device):
+        return "unavailable: the device builds no kernel"
+    try:
+        opts = exact_options(device)
+    except DeviceError:
+        return "refused: division / sqrt not IEEE float32 (see exact_options)"
+    return ("-cl-fp32-correctly-rounded-divide-sqrt (reported)" if opts
+            else "no option: not reported, IEEE on every probe value")

@@ -41,7 +41,7 @@ inline vfloat v_next_t(const v_rays *r)
 
 /* Alpha-composites the samples of the lanes in `sample` at p and steps them on
  * (render_ref.composite): the features lane by lane, density and alpha for all lanes
- * at once (two vector exps). */
+ * at once (two vector exps); the march loop counts the samples. */
 inline void v_composite(const ngp_model *m, v_rays *r, const v_march_point *p, vint sample)
 {
     vint idx[N_CORNERS];
@@ -66,7 +66,6 @@ inline void v_composite(const ngp_model *m, v_rays *r, const v_march_point *p, v
     r->opacity = select(r->opacity, r->opacity + w, sample);
     r->depth_acc = select(r->depth_acc, r->depth_acc + w * p->t, sample);
     r->T = select(r->T, r->T * (1.0f - alpha), sample);
-    r->n_occ = v_inc(r->n_occ, sample);
     r->k = v_inc(r->k, sample);
 }
 
@@ -111,11 +110,15 @@ __kernel void ngprt_march(__global const float *cam, const int width, const int 
     vint active = v_rays_start(&r, cam, px0 + LANE_IDS, py, width, s, near, far);
     active = active & v_marching(&r);
     while (any(active)) {
-        r.n_march = v_inc(r.n_march, active);
         const v_march_point p = v_point_at(&r, r.k);
         const vint code = v_gather_u16(m.exit_code, v_flat(p.cell, (vint)(L_C)), active);
         const vint sample = active & VMASK((code & 0xff) == 0);
         const vint empty = active & ~sample;
+        /* Both counters here, outside the branches: counted inside v_composite, Intel's
+         * CPU compiler (2026.2, RAYS = 1, no G) lost n_occ (docs/performance.md "Vendor
+         * notes"). */
+        r.n_march = v_inc(r.n_march, active);
+        r.n_occ = v_inc(r.n_occ, sample);
         if (any(sample)) v_composite(&m, &r, &p, sample);
         if (any(empty)) r.k = select(r.k, v_skip(&m, &r, &p, empty, code), empty);
         active = active & v_marching(&r);

@@ -1,7 +1,7 @@
 /* Scene space per lane (clrender/ngprt/space.py, render_ref.py): the rays of a
  * work-item, their range, the lattice points they march and the grid cells of a point.
  *
- * The exact build (device.EXACT_OPTIONS) keeps FP contraction off and asks for correctly
+ * The exact build (device.exact_options) keeps FP contraction off and asks for correctly
  * rounded division and sqrt, so positions, cells and lattice indices are bit-identical
  * to the numpy reference; the fast build computes them by the same operations.
  */

@@ -29,6 +29,30 @@ def pytest_configure(config):
         os.environ["PYTHONPATH"] = os.pathsep.join(paths + [os.environ.get("PYTHONPATH", "")])
 
 
+# The CPU OpenCL implementations the kernel tests run on (cl_platform): PoCL (Debian's or
+# pip's) and Intel's CPU runtime from pip (clrender/icd.py registers it).
+CL_PLATFORMS = {"pocl": "Portable Computing Language", "intel": "Intel(R) OpenCL"}
+_INSTALL = {"intel": "pip install intel-opencl-rt intel-cmplr-lib-rt tbb",
+            "pocl": "apt install pocl-opencl-icd, or pip install pocl-binary-distribution"}
+
+
+@pytest.fixture(params=list(CL_PLATFORMS))
+def cl_platform(request, monkeypatch):
+    """The test runs once per implementation in CL_PLATFORMS, on its first device that
+    builds kernels, by $CLRENDER_DEVICE (the device's index, inherited by child
+    processes); where the implementation is absent, skipped saying what to install (failed
+    under CI=true, as .ci/install installs both: tests/deps.py)."""
+    from clrender import device
+    from deps import require
+
+    name = CL_PLATFORMS[request.param]
+    found = [i for i, d in enumerate(device.list_devices())
+             if d.platform.name.strip() == name and device._compiles(d)]
+    require(bool(found), f"a {name} device that builds kernels ({_INSTALL[request.param]})")
+    monkeypatch.setenv("CLRENDER_DEVICE", str(found[0]))
+    return request.param
+
+
 @pytest.fixture
 def one_torch_thread():
     """torch on one thread for the test: CPU training is then bit-reproducible (with two

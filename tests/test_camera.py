@@ -17,7 +17,7 @@ def _cameras():
 
 
 @pytest.mark.parametrize("cam", _cameras())
-def test_ray_kernel_matches_numpy(cam):
+def test_ray_kernel_matches_numpy(cam, cl_platform):
     o, d = generate_rays(cam)
     o_cl, d_cl = generate_rays_cl(cam)
     assert np.abs(d - d_cl).max() <= 1e-5

@@ -1,5 +1,7 @@
-"""bench.device_check on this machine's devices against references made here (small sizes):
-every device renders both methods, and the chosen device reproduces its own references."""
+"""bench.device_check on this machine's devices against references made here (small sizes),
+once per CPU implementation (cl_platform: PoCL, Intel's runtime) as the reference's
+device: every device that builds kernels renders both methods, and the reference's device
+reproduces its own references."""
 from __future__ import annotations
 
 import json
@@ -7,9 +9,10 @@ import json
 import pytest
 
 from bench import device_check
+from clrender.device import _compiles, list_devices
 
 
-def test_device_check_against_own_reference(tmp_path, monkeypatch):
+def test_device_check_against_own_reference(tmp_path, monkeypatch, cl_platform):
     monkeypatch.setattr(device_check, "SIZES", ((40, 30), (24, 24)))
     device_check.make_reference(tmp_path / "ref")
     devices = device_check.run(tmp_path / "ref", tmp_path / "out", repeats=1)
@@ -24,6 +27,11 @@ def test_device_check_against_own_reference(tmp_path, monkeypatch):
     assert {"ngprt", "ndrf"} <= set(device_check.checked_methods())
     for r in rows:
         assert "error" not in r and r["max_abs_diff"] == pytest.approx(0.0, abs=1 / 65535), r
+    builds = {f"{d.platform.name.strip()} / {d.name.strip()}" for d in list_devices()
+              if _compiles(d)}
+    for d in devices:
+        if d["name"] in builds:
+            assert all("error" not in r for r in d["rows"]), (d["name"], d["rows"])
     assert "| ndrf | 40x30 |" in (tmp_path / "out" / "device_check.md").read_text()
 
 

@@ -119,7 +119,7 @@ for path in sys.argv[1:]:
 """
 
 
-def test_loaded_mutants_render_in_bounded_time(outcomes):
+def test_loaded_mutants_render_in_bounded_time(outcomes, cl_platform):
     loaded = [(label, str(path)) for label, path, e in outcomes if e is None]
     root = Path(__file__).resolve().parents[1]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(root),

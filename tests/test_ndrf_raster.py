@@ -81,7 +81,7 @@ def _check_hits(meshes, camera, raster_hits, embree_hits, strict_agreement=True)
 
 @pytest.mark.parametrize("rows", [16, 1])
 @pytest.mark.parametrize("K", [1, 2, 3, 4])
-def test_raster_matches_embree(K, rows):
+def test_raster_matches_embree(K, rows, cl_platform):
     model = _model(K)
     meshes = [model.mesh(k)[:2] for k in range(K)]
     raster, caster = Rasteriser(model, rows=rows), HitCaster(model)
@@ -92,7 +92,7 @@ def test_raster_matches_embree(K, rows):
         assert s["covered"] > 0, name
 
 
-def test_layouts_agree_bit_for_bit():
+def test_layouts_agree_bit_for_bit(cl_platform):
     model = _model(3)
     for name in ("close-up", "inside"):
         camera = Camera.from_fov(0.9, 61, 47, _views(model)[name][1])
@@ -121,7 +121,7 @@ def test_invalid_layout_is_refused():
         Rasteriser(_model(1), rows=3)
 
 
-def test_shared_edges_cover_each_pixel_once():
+def test_shared_edges_cover_each_pixel_once(cl_platform):
     # Two triangles sharing the diagonal of a square, a pixel centre exactly on it (the image
     # is 2x2 pixels looking straight down at the square; its diagonal passes through the
     # pixel centres (0.5, 0.5) and (1.5, 1.5)), and the same square split the other way.
@@ -160,7 +160,7 @@ def test_odd_image_sizes(size):
                 HitCaster(model).cast_camera(camera))
 
 
-def test_renderer_hit_sources_agree_and_match_reference():
+def test_renderer_hit_sources_agree_and_match_reference(cl_platform):
     model = _model(2)
     camera = Camera.from_fov(0.9, 80, 60, _views(model)["orbit"][1])
     raster = Renderer(model, hits="raster", exact=True).render(camera, stats=True)

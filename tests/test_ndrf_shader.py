@@ -70,7 +70,7 @@ def _inputs(model, width: int, height: int, c2w):
 
 @pytest.mark.parametrize("kernel_size", [2, 1])
 @pytest.mark.parametrize("K", [1, 2, 3])
-def test_shade_matches_reference(K, kernel_size):
+def test_shade_matches_reference(K, kernel_size, cl_platform):
     model, shader = _model(K, kernel_size), _shader(K, kernel_size)
     background = (0.2, 0.7, 0.4)
     for width, height, c2w in VIEWS:
@@ -100,7 +100,7 @@ SHAPES = [dict(thresholds=THRESHOLDS, hidden=20, n_freq=7, kernel_size=2),
 
 @pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("layout", LAYOUTS)
-def test_other_shapes_and_layouts_match_reference(monkeypatch, layout, shape):
+def test_other_shapes_and_layouts_match_reference(monkeypatch, layout, shape, cl_platform):
     from clrender.ndrf import shader_cl
 
     monkeypatch.setattr(shader_cl, "device_layout", lambda device: dict(layout))
@@ -122,7 +122,7 @@ def test_view_crossing_the_border_reaches_it():
 
 
 @pytest.mark.parametrize("kernel_size", [2, 1])
-def test_screen_buffer_matches_reference(kernel_size):
+def test_screen_buffer_matches_reference(kernel_size, cl_platform):
     model, shader = _model(2, kernel_size), _shader(2, kernel_size)
     for width, height, c2w in VIEWS:
         camera, hits, dirs = _inputs(model, width, height, c2w)
@@ -170,7 +170,7 @@ def test_buffers_persist_per_size():
 
 
 @pytest.mark.parametrize("kernel_size", [2, 1])
-def test_bands_equal_one_pass(monkeypatch, kernel_size):
+def test_bands_equal_one_pass(monkeypatch, kernel_size, cl_platform):
     # A hidden layer larger than the device's biggest buffer is shaded in bands of rows;
     # bands of 1, 5 and 7 rows give the one-pass image bit for bit, frame after frame (the
     # first band's zero rows are restored after the later bands overwrote them).

@@ -156,7 +156,7 @@ def patch_cameras(size: int = 32) -> list[Camera]:
     return cams
 
 
-def test_kernel_takes_every_occupied_point_like_the_reference(patch_model):
+def test_kernel_takes_every_occupied_point_like_the_reference(patch_model, cl_platform):
     from clrender.ngprt.render_cl import Renderer
 
     renderer = Renderer(patch_model, use_G=True)

@@ -143,18 +143,19 @@ def test_torch_lattice_equals_reference():
         assert np.array_equal(delta[ids == r], t_next - t_ref)
 
 
-def test_kernel_lattice_equals_reference():
+def test_kernel_lattice_equals_reference(cl_platform):
     """The kernel's v_lattice_build / _t / _s (exact build, one lane) on the same rays;
     the renders with 1, 4 and 16 lanes hold the march to the reference
     (tests/test_render_cl.py, test_ngprt_unbounded.py)."""
     import pyopencl as cl
 
-    from clrender.device import EXACT_OPTIONS, _kernel_dir, get_runtime
+    from clrender.device import _kernel_dir, exact_options, get_runtime
     from clrender.ngprt.render_cl import kernel_defines
 
     cfg = preset("tiny", scene="unbounded", L_C=32, G_res=16, log2_T=11)
     defines, _ = kernel_defines(cfg, True, 1, 1)
-    opts = list(EXACT_OPTIONS) + ["-DFAST_MATH=0", f"-I{_kernel_dir()}"] + [
+    rt = get_runtime()
+    opts = list(exact_options(rt.device)) + ["-DFAST_MATH=0", f"-I{_kernel_dir()}"] + [
         f"-D{k}={int(v) if isinstance(v, bool) else v}" for k, v in defines.items()]
     source = """
     #include "ngprt_lattice.h"
@@ -179,7 +180,6 @@ def test_kernel_lattice_equals_reference():
         }
     }
     """
-    rt = get_runtime()
     program = cl.Program(rt.context, source).build(options=opts)
     o, d = (np.concatenate(x) for x in zip(*ray_sets(n=64, seed=3).values()))
     n, m = len(o), 64

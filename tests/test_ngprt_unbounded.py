@@ -163,7 +163,7 @@ def _cameras(size: int = 24) -> list[Camera]:
     return [Camera.from_fov(1.2, size, size, look_at(e, t)) for e, t in zip(eyes, targets)]
 
 
-def test_kernel_takes_the_references_points(box_model):
+def test_kernel_takes_the_references_points(box_model, cl_platform):
     from clrender.ngprt.render_cl import Renderer
 
     total = 0

@@ -47,7 +47,7 @@ def _assert_matches(out: dict, ref: dict):
 
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
 @pytest.mark.parametrize("variant", VARIANTS)
-def test_render_matches_reference(variant, scene):
+def test_render_matches_reference(variant, scene, cl_platform):
     model, camera = _model(variant, scene), _camera(scene)
     out = Renderer(model, use_G=True, exact=True).render(camera, background=BACKGROUND,
                                                        stats=True)
@@ -61,7 +61,7 @@ def test_render_matches_reference(variant, scene):
 @pytest.mark.parametrize("rays,deferred_vec", [(1, 1), (4, 2)])
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
 @pytest.mark.parametrize("variant", ["separate-v", "mlp", "shared-inv"])
-def test_lane_widths_match_reference(variant, scene, rays, deferred_vec):
+def test_lane_widths_match_reference(variant, scene, rays, deferred_vec, cl_platform):
     model, camera = _model(variant, scene, seed=4), _camera(scene, 29)
     out = Renderer(model, use_G=True, exact=True, rays=rays,
                    deferred_vec=deferred_vec).render(camera, background=BACKGROUND, stats=True)
@@ -71,7 +71,7 @@ def test_lane_widths_match_reference(variant, scene, rays, deferred_vec):
 
 
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
-def test_distance_grid_read_from_G_matches_reference(scene):
+def test_distance_grid_read_from_G_matches_reference(scene, cl_platform):
     # L_C / G_res = 3 is no power of two: the kernel reads G itself instead of from the
     # exit codes (render_cl.g_in_codes).
     config = preset("tiny", variant="separate-v", scene=scene, L_C=48, log2_T=11, G_res=16)
@@ -84,7 +84,7 @@ def test_distance_grid_read_from_G_matches_reference(scene):
 
 
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
-def test_three_levels_march_matches_reference(scene):
+def test_three_levels_march_matches_reference(scene, cl_platform):
     model, camera = _model("separate-v", scene, L=3, seed=1), _camera(scene, 24)
     out = Renderer(model, use_G=False, exact=True).march(camera)
     origins, dirs = (a.reshape(-1, 3) for a in generate_rays(camera))
@@ -98,7 +98,7 @@ def test_three_levels_march_matches_reference(scene):
 
 
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
-def test_step_finer_than_the_coarse_grid_matches_reference(scene):
+def test_step_finer_than_the_coarse_grid_matches_reference(scene, cl_platform):
     # step_res = 2 L_C (the cpu preset's ratio): two lattice points per coarse voxel
     # diagonal; the march, G's skips and the lattice are the reference's.
     config = preset("tiny", variant="separate-v", scene=scene, L_C=32, log2_T=11, G_res=16,
@@ -117,7 +117,7 @@ def test_step_finer_than_the_coarse_grid_matches_reference(scene):
 
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
 @pytest.mark.parametrize("variant", VARIANTS)
-def test_distance_grid_skips_only_empty_space(variant, scene):
+def test_distance_grid_skips_only_empty_space(variant, scene, cl_platform):
     # Eight small spheres in the corners of the box leave its centre empty down to mip
     # level 3 (cells coarser than G's), more than a coarse cell from any content: rays
     # across it read G, whose ball reaches past the empty mip cells they are in.

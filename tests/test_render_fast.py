@@ -26,7 +26,7 @@ MIN_PSNR = 50.0
 
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
 @pytest.mark.parametrize("variant", VARIANTS)
-def test_fast_build_within_50db_of_exact(variant, scene):
+def test_fast_build_within_50db_of_exact(variant, scene, cl_platform):
     config = preset("tiny", variant=variant, scene=scene, L_C=32, log2_T=11, G_res=16)
     model = random_baked_model(config, seed=2)
     fast, exact = Renderer(model), Renderer(model, exact=True)
