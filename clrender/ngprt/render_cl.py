@@ -312,9 +312,9 @@ class Renderer:
             kernel times in milliseconds and ``ms`` their sum. With ``stats``: ``n_march``,
             ``n_occ`` (H, W) int32 marching points and occupied samples per ray; ``depth``
             (H, W) float32 world units along the ray (0 where nothing was hit); ``opacity``
-            (H, W) float32; with ``count_reads`` (the counting build's times) ``reads``
-            (H, W, 3) int32 (:data:`marches.READ_KINDS`), ``n_reads`` their sum and
-            ``n_skip_reads`` the occupancy and G reads, (H, W) int32.
+            (H, W) float32; with ``count_reads`` (the counting build's times)
+            ``reads_<kind>`` per :data:`marches.READ_KINDS`, ``n_reads`` their sum and
+            ``n_skip_reads`` the occupancy and G reads, (H, W) int32 reads per ray.
         """
         h, w, n = camera.height, camera.width, camera.width * camera.height
         out = self._outputs(camera)
@@ -336,6 +336,8 @@ class Renderer:
                 opacity=self._read(out["feat"], (n, 8), F32)[:, 7].reshape(h, w).copy())
         if counted:
             reads = self._read(out["reads"], (h, w, len(READ_KINDS)), np.int32)
-            result.update(reads=reads, n_reads=reads.sum(axis=2, dtype=np.int32),
+            result.update({f"reads_{kind}": reads[..., i].copy()
+                           for i, kind in enumerate(READ_KINDS)})
+            result.update(n_reads=reads.sum(axis=2, dtype=np.int32),
                           n_skip_reads=reads[..., :2].sum(axis=2, dtype=np.int32))
         return result
