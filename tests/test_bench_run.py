@@ -1,9 +1,11 @@
 """`python -m bench.run` end to end (slow): a small built-in scene, the `tiny` preset.
 
-Trains the three models of Table 4 once, renders with and without G, and checks what the
-table must show whatever the figures: one model per L shared by its two rows, G changing
-the marching points only (same occupied points and images), and a cached second run that
-trains nothing.
+Trains the three models of Table 4 once, renders each with the three marches, and checks
+what the table must show whatever the figures: one model per L shared by its three rows,
+the marches changing the marching points and reads only (same occupied points, images
+identical bit for bit, checked by the harness), each row with G timed against the paper's
+w/o G row as interleaved pairs at the test size and at 1920x1080, and a cached second run
+that trains nothing.
 """
 from __future__ import annotations
 
@@ -31,18 +33,32 @@ def test_table4_end_to_end(small_scene, tmp_path, capsys):
     assert run.main(args) == 0
     data = json.loads((tmp_path / "out" / "table4.json").read_text())
     rows = data["rows"]
-    assert [(r["L"], r["use_G"]) for r in rows] == [(L, g) for L in (2, 3, 4) for g in (0, 1)]
+    assert [(r["L"], r["march"], r["use_G"]) for r in rows] == [
+        (L, m, g) for L in (2, 3, 4) for m, g in (("paper", 0), ("paper", 1), ("ours", 1))]
     assert data["preset"] == "tiny" and data["resolution"] == "40x40"
-    for off, on in zip(rows[::2], rows[1::2]):
-        assert off["model_key"] == on["model_key"]
-        assert on["Occupied"] == off["Occupied"] and on["PSNR"] == pytest.approx(off["PSNR"], abs=1e-6)
-        assert on["Marching"] <= off["Marching"]
-        assert on["speedup"] == pytest.approx(off["time_ms"]["median"] / on["time_ms"]["median"])
+    for base, paper_g, ours in zip(rows[::3], rows[1::3], rows[2::3]):
+        assert base["model_key"] == paper_g["model_key"] == ours["model_key"]
+        assert base["paired_speedup"] is None and base["same_image"] is None
+        for on in (paper_g, ours):
+            assert on["Occupied"] == base["Occupied"] and on["PSNR"] == base["PSNR"]
+            assert on["same_image"] == {"identical": True, "max_diff": 0.0, "views": 2}
+            assert on["speedup"] == pytest.approx(base["time_ms"]["median"]
+                                                  / on["time_ms"]["median"])
+            for size, pair in [("40x40", on["paired_speedup"]),
+                               ("1920x1080", on["paired_at"]["1920x1080"])]:
+                assert pair["size"] == size and pair["stage"] == "march" and pair["n"] == 2
+                assert 0 < pair["lo"] <= pair["ratio"] <= pair["hi"]
+        # Ours visits no more points than the paper's w/o G and reads one code a point.
+        assert ours["Marching"] <= base["Marching"] and ours["Reads"] < base["Reads"]
+        assert ours["Skip reads"] == pytest.approx(ours["Marching"])
+        assert base["Skip reads"] > base["Marching"]
         # The table's quality is `clrender eval`'s on the cached model (one scoring loop).
-        baked = tmp_path / "cache" / "models" / on["model_key"] / "model.npz"
-        assert on["PSNR"] == pytest.approx(evaluate(baked, small_scene)["mean"]["psnr"], abs=1e-9)
+        baked = tmp_path / "cache" / "models" / ours["model_key"] / "model.npz"
+        assert ours["PSNR"] == pytest.approx(evaluate(baked, small_scene)["mean"]["psnr"],
+                                             abs=1e-9)
     assert len({r["model_key"] for r in rows}) == 3
-    assert "| L=4 w/ G |" in (tmp_path / "out" / "table4.md").read_text()
+    md = (tmp_path / "out" / "table4.md").read_text()
+    assert "| L=4 ours |" in md and md.count("| identical |") == 6
     models = sorted((tmp_path / "cache" / "models").iterdir())
     stamps = [(m / "model.npz").stat().st_mtime_ns for m in models]
     assert run.main(args) == 0                  # cached: nothing retrained or rebaked
