@@ -74,3 +74,24 @@ def test_paired_sizes_must_be_frame_sizes(tmp_path, monkeypatch):
         'model = { variant = "sum", L = 2 }\n')
     with pytest.raises(ValueError, match=r"bad.toml: paired_sizes: frame size '1920'"):
         ablation.load_table("bad")
+
+
+def test_march_bound_counts_what_each_march_reads():
+    from bench.limits import march_bound, sample_flops, table_bytes
+    from clrender.ngprt.config import preset
+    from clrender.ngprt.random_model import random_baked_model
+
+    model = random_baked_model(preset("tiny", L_C=32, G_res=16), 0)
+    cfg = model.config
+    ours, paper = table_bytes(model, "ours"), table_bytes(model, "paper")
+    assert ours["occupancy"] == 2 * 32 ** 3 and ours["G"] == 16 ** 3
+    assert paper["occupancy"] == sum((32 >> lev) ** 3 for lev in range(5))
+    rates = {"occupancy": 1e3, "G": 2e3, "coarse": 4e3, "fine": 8e3}
+    limits = {"gathers_per_s": rates, "flops_per_s": 1e9}
+    b = march_bound(cfg, {"occupancy": 100.0, "G": 10.0}, 5.0, limits)
+    chunks = 1 + -(-cfg.n_attention // 8)
+    gathers = 100 / 1e3 + 10 / 2e3 + 5 * 8 * chunks / 4e3 + 5 * 8 * cfg.L / 8e3
+    assert b["gather_ms"] == pytest.approx(1e3 * gathers)
+    assert b["flop_ms"] == pytest.approx(1e3 * 5 * sample_flops(cfg) / 1e9)
+    more = march_bound(cfg, {"occupancy": 300.0, "G": 10.0}, 5.0, limits)
+    assert more["ms"] == pytest.approx(b["ms"] + 200.0)            # 200 reads at 1e3 / s
