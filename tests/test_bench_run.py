@@ -86,7 +86,8 @@ def test_seeds_must_be_a_positive_count(capsys):
 def fake_training(monkeypatch):
     """run.main without training or rendering: every (row, seed) gets a fake model whose
     PSNR is 20 + seed; returns the (method, seed, downscale) of every ensure_model call
-    (and ("load", split, downscale) of every dataset load)."""
+    (and ("load", split, downscale) of every dataset load, ("pair", row, baseline) of every
+    paired timing, faked too)."""
     from pathlib import Path
     from types import SimpleNamespace
 
@@ -109,7 +110,14 @@ def fake_training(monkeypatch):
                          size_MB=1.0, time_note="fake", time_at={800: ms},
                          sample=np.zeros((2, 2, 3), np.float32))
 
+    def measure_pair(row_baked, row_render, base_baked, base_render, test_set, **kw):
+        calls.append(("pair", row_baked.name, base_baked.name))
+        pair = {"ratio": 1.5, "lo": 1.2, "hi": 1.9, "n": 8, "stage": "frame", "size": "4x4",
+                "ms_row": 10.0, "ms_baseline": 15.0}
+        return {"paired_speedup": pair, "paired_at": {}, "same_image": None}
+
     cam = SimpleNamespace(width=4, height=4)
+    monkeypatch.setattr(measure, "measure_pair", measure_pair)
     monkeypatch.setattr(cache, "ensure_model", ensure_model)
     monkeypatch.setattr(cache, "resolve_scene", lambda scene, root: root)
     monkeypatch.setattr(cache, "data_fingerprint", lambda path, downscale=1: f"fp{downscale}")
@@ -126,9 +134,12 @@ def fake_training(monkeypatch):
 def test_seeds_train_every_row_per_seed_and_the_index_lists_each_table(fake_training, tmp_path):
     common = ["--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
     assert run.main(["ndrf-teacher", "--seed", "5", "--seeds", "2"] + common) == 0
+    # Each seed's row timed against the same seed's baseline, after both were measured.
     assert fake_training == [("load", "test", 1), ("ngprt", 5, 1), ("ngprt", 6, 1),
-                             ("ndrf", 5, 1), ("ndrf", 6, 1)]
+                             ("ndrf", 5, 1), ("ndrf", 6, 1), ("pair", "5", "5"),
+                             ("pair", "6", "6")]
     rows = json.loads((tmp_path / "out" / "ndrf-teacher.json").read_text())["rows"]
+    assert rows[0]["paired_speedup"] is None and rows[1]["paired_speedup"]["ratio"] == 1.5
     assert rows[0]["seeds"] == [5, 6] and rows[0]["PSNR"] == 25.5
     assert [p["model_key"] for p in rows[1]["per_seed"]] == ["ndrf-5", "ndrf-6"]
     assert "25.50 ± 0.71" in (tmp_path / "out" / "ndrf-teacher.md").read_text()
@@ -162,7 +173,8 @@ def test_builtin_scene_made_once_and_again_when_the_generator_changed(tmp_path, 
 def test_downscale_reaches_the_test_set_the_models_and_their_fingerprint(fake_training, tmp_path):
     common = ["--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
     assert run.main(["ndrf-teacher", "--downscale", "4"] + common) == 0
-    assert fake_training == [("load", "test", 4), ("ngprt", 0, 4), ("ndrf", 0, 4)]
+    assert fake_training == [("load", "test", 4), ("ngprt", 0, 4), ("ndrf", 0, 4),
+                             ("pair", "0", "0")]
     assert "downscale 4" in (tmp_path / "out" / "ndrf-teacher.md").read_text()
     assert run.main(["train-curve", "--downscale", "2"] + common) == 2
 
