@@ -73,6 +73,12 @@ class Table:
     show_stages: bool = False       # a column with the per-stage times (NDRF tables)
     timing_sizes: tuple[int, ...] = ()   # frame widths also timed (test cameras scaled)
     comparisons: tuple[Comparison, ...] = ()
+    # Rows with a baseline are timed against it as interleaved pairs (bench.measure
+    # .measure_pair) on the renderer's ms_<paired_stage> (None: the frame), at the test
+    # size and at paired_sizes ("WxH"); same_image: a row must render its baseline's image.
+    paired_stage: str | None = None
+    paired_sizes: tuple[str, ...] = ()
+    same_image: bool = False
 
     @property
     def stem(self) -> str:
@@ -215,4 +221,17 @@ def load_table(key: str) -> Table:
                  paper_columns=tuple(spec["paper_columns"]), rows=tuple(rows),
                  show_stages=bool(spec.get("show_stages", False)),
                  timing_sizes=tuple(int(w) for w in spec.get("timing_sizes", ())),
-                 comparisons=_comparisons(spec, rows, path))
+                 comparisons=_comparisons(spec, rows, path),
+                 paired_stage=spec.get("paired_stage"),
+                 paired_sizes=tuple(_sizes(spec.get("paired_sizes", ()), path)),
+                 same_image=bool(spec.get("same_image", False)))
+
+
+def _sizes(sizes, path: Path) -> list[str]:
+    """The table's ``paired_sizes``, each "WxH" (:func:`bench.sizes.parse_size`)."""
+    from bench.sizes import parse_size
+
+    try:
+        return [f"{w}x{h}" for w, h in map(parse_size, sizes)]
+    except (ValueError, AttributeError) as exc:
+        raise ValueError(f"{path}: paired_sizes: {exc}") from exc

@@ -15,10 +15,13 @@ A kernel's bound is the time its own counters need at those rates, gathers and F
 overlapped (a lower bound for a machine that does one at a time, and at most 2x below a
 bound that overlaps them perfectly):
 
-* march: per marching point 1 read of the finest occupancy level and, per empty point, 1
-  more (the exit level or G); per occupied sample ``8 * (1 + ceil(n_attention / 8))``
-  coarse float8 gathers from the coarse grid and 8 per fine level from the fine tables,
-  and the FLOPs of the trilinear sums and the fusion (:func:`sample_flops`);
+* march: the occupancy and G reads the march counted (the counting build,
+  :mod:`clrender.ngprt.marches`: ours one uint16 exit code a point from an ``L_C^3``
+  table, G only where the code lacks it; the paper's 1 to ``N_MIP`` mip bytes a point and
+  G where the exit level is coarser than G), each at the gather rate of its table's size;
+  per occupied sample ``8 * (1 + ceil(n_attention / 8))`` coarse float8 gathers from the
+  coarse grid and 8 per fine level from the fine tables, and the FLOPs of the trilinear
+  sums and the fusion (:func:`sample_flops`);
 * deferred MLP: the MLP's FLOPs per covered pixel (opacity > 0; the kernel writes the
   background elsewhere).
 
@@ -35,7 +38,8 @@ import numpy as np
 import pyopencl as cl
 
 from clrender.device import event_ms, get_runtime, padded, work_group_size
-from clrender.ngprt.config import DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, SH_DIM, preset
+from clrender.ngprt.config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM,
+                                   preset)
 
 F8_BYTES = 32
 # Rate kernels, specialised with -D (GATHER_STREAMS, FLOP_CHAINS) like the renderer's.
@@ -138,23 +142,28 @@ def flop_rate(device=None, repeats: int = 5, flops: float = 4e9) -> float:
     return best
 
 
-def table_bytes(model) -> dict:
-    """Bytes of the tables the march reads: ``occupancy`` (the finest level), ``coarse``
+def table_bytes(model, march: str = "ours") -> dict:
+    """Bytes of the tables the march reads: ``occupancy`` (ours: the uint16 exit codes,
+    ``2 L_C^3``; the paper's: the ``N_MIP`` mip levels, a byte a cell), ``G``, ``coarse``
     (the sparse coarse grid, corners padded to float8 chunks) and ``fine`` (all L hash
     tables)."""
     cfg = model.config
     corners = int(np.shape(model.arrays["coarse_blocks"])[0]) * (cfg.coarse_block + 1) ** 3
-    return {"occupancy": cfg.L_C ** 3,
+    occupancy = (2 * cfg.L_C ** 3 if march == "ours"
+                 else sum((cfg.L_C >> lev) ** 3 for lev in range(N_MIP)))
+    return {"occupancy": occupancy, "G": cfg.G_res ** 3,
             "coarse": corners * F8_BYTES * (1 + math.ceil(cfg.n_attention / 8)),
             "fine": cfg.L * cfg.T * F8_BYTES}
 
 
-def measure_limits(model, device=None, repeats: int = 5) -> dict:
-    """Gather rates (per second) for each of the model's table sizes and the FLOP rate."""
+def measure_limits(model, device=None, repeats: int = 5, march: str = "ours") -> dict:
+    """Gather rates (per second) for each of the model's table sizes (:func:`table_bytes`
+    of ``march``) and the FLOP rate."""
+    sizes = table_bytes(model, march)
     rates = {name: gather_rate(max(nbytes, F8_BYTES), device, repeats)
-             for name, nbytes in table_bytes(model).items()}
+             for name, nbytes in sizes.items()}
     return {"gathers_per_s": rates, "flops_per_s": flop_rate(device, repeats),
-            "table_bytes": table_bytes(model), "device": get_runtime(device).name}
+            "table_bytes": sizes, "march": march, "device": get_runtime(device).name}
 
 
 def sample_flops(config) -> int:
@@ -172,13 +181,14 @@ def sample_flops(config) -> int:
     return trilinear + fusion[config.variant] + compositing
 
 
-def march_bound(config, n_march: float, n_occ: float, limits: dict) -> dict:
-    """Bound (ms) of the march from its counters (totals over the frame)."""
+def march_bound(config, reads: dict, n_occ: float, limits: dict) -> dict:
+    """Bound (ms) of the march from its counters, totals over the frame: ``reads``
+    {``occupancy``, ``G``: reads the march counted (:mod:`clrender.ngprt.marches`)} and
+    ``n_occ`` samples; ``limits`` of :func:`measure_limits` for the same march."""
     g = limits["gathers_per_s"]
     coarse_chunks = 1 + math.ceil(config.n_attention / 8)
-    empty = max(n_march - n_occ, 0.0)
-    gather_s = ((n_march + empty) / g["occupancy"] + n_occ * 8 * coarse_chunks / g["coarse"]
-                + n_occ * 8 * config.L / g["fine"])
+    gather_s = (reads["occupancy"] / g["occupancy"] + reads["G"] / g["G"]
+                + n_occ * 8 * coarse_chunks / g["coarse"] + n_occ * 8 * config.L / g["fine"])
     flop_s = n_occ * sample_flops(config) / limits["flops_per_s"]
     return {"ms": 1e3 * (gather_s + flop_s), "gather_ms": 1e3 * gather_s,
             "flop_ms": 1e3 * flop_s}

@@ -59,3 +59,83 @@ def measure_row(baked_path, test_set, render_options: dict, device=None, repeats
         stages={k: float(np.median(v)) for k, v in stages.items()}, stats=stats,
         size_MB=Path(baked_path).stat().st_size / 2**20, time_note=renderer.time_note,
         time_at=time_at, sample=sample)
+
+
+def speedup_interval(ratios) -> dict:
+    """The speed-up from paired timings: ``ratio`` = exp(mean log ratio) and its 95%
+    interval ``lo``-``hi`` = exp(mean ± t(0.975, n - 1) * sd / sqrt(n)) over the ``n``
+    pairs (each baseline time / row time, >1 = the row is faster); lo = hi = ratio for one
+    pair."""
+    from scipy import stats
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        logs = np.log(np.asarray(ratios, np.float64))
+    n = len(logs)
+    if n == 0 or not np.all(np.isfinite(logs)):
+        raise ValueError(f"speed-up interval: needs finite positive ratios, got {list(ratios)}")
+    mean = float(logs.mean())
+    half = float(stats.t.ppf(0.975, n - 1) * logs.std(ddof=1) / np.sqrt(n)) if n > 1 else 0.0
+    return {"ratio": float(np.exp(mean)), "lo": float(np.exp(mean - half)),
+            "hi": float(np.exp(mean + half)), "n": n}
+
+
+def time_pairs(row, base, cameras, repeats: int, stage: str | None, background=None) -> dict:
+    """Times ``row`` and ``base`` (two renderers) as interleaved pairs on the same cameras:
+    each camera rendered by both back to back, the order swapped every pair, after one
+    warm-up render each; the time is the renderer's ``ms_<stage>`` (``stage`` None: the
+    frame's ``ms``). Returns :func:`speedup_interval` of base / row with ``stage``,
+    ``size`` ("WxH") and ``ms_row``, ``ms_baseline`` (medians over the pairs)."""
+    key = "ms" if stage is None else f"ms_{stage}"
+    for cam in cameras[:1]:
+        row.render(cam, background=background)
+        base.render(cam, background=background)
+    mine, theirs = [], []
+    for i in range(repeats):
+        for j, cam in enumerate(cameras):
+            order = ((row, mine), (base, theirs))
+            for r, times in (order if (i + j) % 2 == 0 else order[::-1]):
+                times.append(r.render(cam, background=background)[key])
+    out = speedup_interval(np.asarray(theirs) / np.asarray(mine))
+    cam = cameras[0]
+    return {**out, "stage": stage or "frame", "size": f"{cam.width}x{cam.height}",
+            "ms_row": float(np.median(mine)), "ms_baseline": float(np.median(theirs))}
+
+
+def compare_images(row, base, test_set) -> dict:
+    """Every test view rendered by both renderers: ``identical`` (bit for bit), the largest
+    absolute rgb difference ``max_diff`` and the number of ``views``."""
+    diff = 0.0
+    same = True
+    for cam in test_set.cameras:
+        a = row.render(cam, background=test_set.background)["rgb"]
+        b = base.render(cam, background=test_set.background)["rgb"]
+        same = same and np.array_equal(a, b)
+        diff = max(diff, float(np.abs(a - b).max()))
+    return {"identical": bool(same), "max_diff": diff, "views": len(test_set.cameras)}
+
+
+def measure_pair(row_baked, row_render: dict, base_baked, base_render: dict, test_set,
+                 device=None, repeats: int = 5, timing_views: int = 4, stage: str | None = None,
+                 sizes=(), same_image: bool = False) -> dict:
+    """A row against its baseline, timed as interleaved pairs (:func:`time_pairs`) on the
+    first ``timing_views`` test cameras, at the test size and at each of ``sizes``
+    ("WxH", the cameras through :func:`bench.sizes.at_size`); with ``same_image`` the
+    test views' images compared (:func:`compare_images`).
+
+    Returns:
+        {"paired_speedup": the test size's pairs, "paired_at": {size: pairs},
+        "same_image": :func:`compare_images` or None}.
+    """
+    from bench.sizes import at_size, parse_size
+
+    row = Renderer(methods.load(row_baked), device=device, **row_render)
+    base = Renderer(methods.load(base_baked), device=device, **base_render)
+    cams = test_set.cameras[:timing_views]
+    bg = test_set.background
+    out = {"paired_speedup": time_pairs(row, base, cams, repeats, stage, bg), "paired_at": {}}
+    for size in sizes:
+        w, h = parse_size(size)
+        out["paired_at"][size] = time_pairs(row, base, [at_size(c, w, h) for c in cams],
+                                            repeats, stage, bg)
+    out["same_image"] = compare_images(row, base, test_set) if same_image else None
+    return out

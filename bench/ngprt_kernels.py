@@ -70,7 +70,8 @@ def measure(model, cameras, use_G: bool, repeats: int, device=None, exact: bool 
     load of shared cores moves both; >1 = these kernels faster) with its p10-p90, the
     largest rgb difference and whether every pixel's counters agree.
     """
-    renderers = {"now": Renderer(model, device=device, use_G=use_G, exact=exact)}
+    renderers = {"now": Renderer(model, device=device, use_G=use_G, exact=exact,
+                                 count_reads=True)}
     if baseline is not None:
         renderers["baseline"] = Renderer(model, device=device, use_G=use_G, exact=exact,
                                          kernel_dir=str(baseline))
@@ -79,7 +80,8 @@ def measure(model, cameras, use_G: bool, repeats: int, device=None, exact: bool 
     for camera in cameras:
         first = {name: r.render(camera, background, stats=True) for name, r in renderers.items()}
         st = first["now"]
-        counts.append((st["n_march"].mean(), st["n_occ"].mean(), (st["opacity"] > 0).mean()))
+        counts.append((st["n_march"].mean(), st["n_occ"].mean(), (st["opacity"] > 0).mean(),
+                       st["reads_occupancy"].mean(), st["reads_G"].mean()))
         if baseline is not None:
             old = first["baseline"]
             rgb_diff = max(rgb_diff, float(np.abs(st["rgb"] - old["rgb"]).max()))
@@ -95,7 +97,9 @@ def measure(model, cameras, use_G: bool, repeats: int, device=None, exact: bool 
     row = _time_summary(times["now"])
     row.update(marching=float(np.mean([c[0] for c in counts])),
                occupied=float(np.mean([c[1] for c in counts])),
-               covered=float(np.mean([c[2] for c in counts])))
+               covered=float(np.mean([c[2] for c in counts])),
+               reads={"occupancy": float(np.mean([c[3] for c in counts])),
+                      "G": float(np.mean([c[4] for c in counts]))})
     if baseline is not None:
         row["baseline"] = _time_summary(times["baseline"])
         row["vs_baseline"] = float(np.median(pairs))
@@ -104,7 +108,8 @@ def measure(model, cameras, use_G: bool, repeats: int, device=None, exact: bool 
     if limits is not None:
         n = cameras[0].width * cameras[0].height
         row["bound"] = {
-            "march": march_bound(model.config, row["marching"] * n, row["occupied"] * n, limits),
+            "march": march_bound(model.config, {k: v * n for k, v in row["reads"].items()},
+                                 row["occupied"] * n, limits),
             "deferred": deferred_bound(row["covered"] * n, limits)}
         for stage in ("march", "deferred"):
             row["bound"][stage]["ratio"] = row[stage]["median"] / row["bound"][stage]["ms"]

@@ -67,6 +67,7 @@ def _head(table, extra: list[str]) -> list[str]:
     if any(r.baseline for r in table.rows):
         head += ["Speed-up", "Speed-up (paper)"]
     head += [f"Time at width {w} (ms)" for w in table.timing_sizes]
+    head += _paired_head(table)
     return head + extra + ["Time p10-p90 (ms)"] + (["Stages (ms)"] if table.show_stages else []) \
         + ["Size (MB)", "Train (min)"]
 
@@ -94,6 +95,7 @@ def markdown(table, results: list, meta: dict, claims: list[dict]) -> str:
             cells += [compare.speedup_cell(None if ox is None else paired or {"ratio": ox}),
                       "" if px is None else f"{px:.2f}x"]
         cells += [f"{m.time_at[w]['median']:.1f}" for w in table.timing_sizes]
+        cells += _paired_cells(table, results, row, m)
         cells += [_ours(table, c, m, n) for c in extra]
         cells.append(f"{m.time['p10']:.1f}-{m.time['p90']:.1f}")
         if table.show_stages:
@@ -105,9 +107,77 @@ def markdown(table, results: list, meta: dict, claims: list[dict]) -> str:
               f"{results[0].time['n']} timed frames{' per seed' if n > 1 else ''}. "
               "Speed-up: the baseline row's time "
               "(" + (", ".join(sorted({r.baseline for r in table.rows if r.baseline})) or "none")
-              + ") over this row's, measured in the same run. " + _lpips_note(table, results)
+              + ") over this row's, measured in the same run. " + _paired_note(table, results)
+              + _lpips_note(table, results)
               + (_seeds_note(results[0].seeds) if n > 1 else ""), ""]
     return "\n".join(lines + compare.markdown(claims))
+
+
+# ---- a row against its baseline: interleaved pairs, counts, images -------------------
+
+def _paired_head(table) -> list[str]:
+    """Columns of the pairs (tables with baselines): the paired stage's time per size,
+    the speed-up at each other size, the counts and (``same_image``) the images against
+    the baseline."""
+    if not any(r.baseline for r in table.rows):
+        return []
+    stage = table.paired_stage or "frame"
+    head = [f"{stage} ms, test size (paired)"]
+    for size in table.paired_sizes:
+        head += [f"{stage} ms at {size} (paired)", f"Speed-up at {size}"]
+    head.append("Counts vs baseline")
+    return head + (["Image vs baseline"] if table.same_image else [])
+
+
+def _paired_ms(table, results: list, row, size: str) -> float | None:
+    """Median ms of the paired stage for ``row`` at ``size`` ("test" or "WxH"): from its
+    own pairs, or, for a baseline, from the first row timed against it."""
+    def at(m):
+        return m.paired_speedup if size == "test" else (m.paired_at or {}).get(size)
+
+    by_name = dict(zip([r.name for r in table.rows], results))
+    if at(by_name[row.name]) is not None:
+        return at(by_name[row.name])["ms_row"]
+    for other in table.rows:
+        if other.baseline == row.name and at(by_name[other.name]) is not None:
+            return at(by_name[other.name])["ms_baseline"]
+    return None
+
+
+def _paired_cells(table, results: list, row, m) -> list[str]:
+    if not _paired_head(table):
+        return []
+    ms = _paired_ms(table, results, row, "test")
+    cells = ["" if ms is None else f"{ms:.2f}"]
+    for size in table.paired_sizes:
+        ms = _paired_ms(table, results, row, size)
+        pair = (m.paired_at or {}).get(size)
+        cells += ["" if ms is None else f"{ms:.2f}", compare.speedup_cell(pair)]
+    base = dict(zip([r.name for r in table.rows], results)).get(row.baseline)
+    counts = [] if base is None or row.baseline == row.name else [
+        f"{col} {m.stats[col] / base.stats[col]:.3f}x" for col in m.stats
+        if base.stats.get(col)]
+    cells.append(", ".join(counts))
+    if table.same_image:
+        check = m.same_image
+        cells.append("" if check is None else "identical" if check["identical"] is True
+                     else f"**DIFFERS** (max {check['max_diff']:.2g})")
+    return cells
+
+
+def _paired_note(table, results: list) -> str:
+    if not any(m.paired_speedup for m in results):
+        return ""
+    stage = f"`ms_{table.paired_stage}`" if table.paired_stage else "the frame time"
+    note = (f"Speed-up with an interval: the row and its baseline rendered as interleaved "
+            f"pairs in one run (each timing camera by both back to back, the order swapped "
+            f"every pair), on {stage}; the geometric mean of baseline / row over the pairs "
+            f"and its 95% interval (t over the pairs' log ratios). Counts vs baseline: this "
+            f"row's counts over the baseline's (exact counts, no interval). ")
+    if table.same_image:
+        note += ("Image vs baseline: every test view rendered by both, compared bit for bit "
+                 "(these rows must not change the image; no PSNR verdict). ")
+    return note
 
 
 def _seeds_note(seed_list: list[int]) -> str:
@@ -186,7 +256,9 @@ def _record(table, row, m, stats: list[str], speedup, sample: str) -> dict:
             "baseline": row.baseline, "speedup": speedup, "sample": sample, "paper": row.paper,
             "seeds": m.seeds,
             "per_seed": None if m.per_seed is None else [p.to_json() for p in m.per_seed],
-            "spread": _spreads(table, m, stats)}
+            "spread": _spreads(table, m, stats),
+            "paired_speedup": m.paired_speedup, "paired_at": m.paired_at,
+            "same_image": m.same_image}
 
 
 def _csv(table, records: list[dict], stats: list[str], n_seeds: int) -> str:

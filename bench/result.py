@@ -25,6 +25,12 @@ class RowResult:
         train_minutes, model_key: the model's training time and cache key.
         seeds, per_seed: over several seeds, the seeds and each seed's result (without its
             sample); None for one measurement.
+        paired_speedup: against the row's baseline, timed as interleaved pairs at the test
+            size (:func:`bench.measure.time_pairs`): {ratio, lo, hi (95% interval), n,
+            stage, size, ms_row, ms_baseline}; None without a baseline.
+        paired_at: {"WxH": the same} at the table's ``paired_sizes``.
+        same_image: for a table whose rows must render their baseline's image
+            (``same_image``): {identical, max_diff, views}; else None.
     """
 
     psnr: float
@@ -42,6 +48,9 @@ class RowResult:
     model_key: str = ""
     seeds: list | None = None
     per_seed: list | None = None
+    paired_speedup: dict | None = None
+    paired_at: dict = field(default_factory=dict)
+    same_image: dict | None = None
 
     def of_model(self, train_minutes: float, model_key: str) -> "RowResult":
         """This result with its model's training time and cache key."""
@@ -53,4 +62,6 @@ class RowResult:
                 "wall_ms": self.wall_ms, "stages": self.stages, **self.stats,
                 "time_at": {str(w): t for w, t in self.time_at.items()},
                 "size_MB": self.size_MB, "time_note": self.time_note,
-                "train_minutes": self.train_minutes, "model_key": self.model_key}
+                "train_minutes": self.train_minutes, "model_key": self.model_key,
+                "paired_speedup": self.paired_speedup, "paired_at": self.paired_at,
+                "same_image": self.same_image}

@@ -47,10 +47,9 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict,
                                             args.preset or table.preset, row.method, row.model,
                                             seed=seed, downscale=args.downscale)
                            for row in table.rows for seed in seed_list], f"{table.key} train")
-    results, used = [], {}
+    measured, entries, used = {}, {}, {}
     with tqdm(total=len(table.rows) * len(seed_list), desc=table.key, unit="model") as bar:
         for row in table.rows:
-            per_seed = []
             for seed in seed_list:
                 entry = cache.ensure_model(args.cache, data, fingerprint,
                                            args.preset or table.preset, row.method, row.model,
@@ -58,15 +57,45 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict,
                                            downscale=args.downscale)
                 m = measure_row(entry.baked, test_set, row.render, device=args.device,
                                 repeats=args.repeats, timing_sizes=table.timing_sizes)
-                per_seed.append(m.of_model(entry.train_minutes, entry.key))
+                measured[row.name, seed] = m.of_model(entry.train_minutes, entry.key)
+                entries[row.name, seed] = entry
                 used[entry.key] = entry.trained_by
                 bar.update()
-            results.append(seeds.aggregate(per_seed, seed_list))
+    _pair_rows(table, measured, entries, test_set, seed_list, args)
+    results = [seeds.aggregate([measured[row.name, seed] for seed in seed_list], seed_list)
+               for row in table.rows]
     cam = test_set.cameras[0]
     meta = {**meta, "resolution": f"{cam.width}x{cam.height}",
             "code": {m: code_fingerprint(m) for m in sorted({r.method for r in table.rows})},
             "cache": {"root": str(args.cache), "models": used}}
     return report.write_table(args.out, table, results, meta)
+
+
+def _pair_rows(table, measured: dict, entries: dict, test_set, seed_list, args) -> None:
+    """Each row with a baseline timed against it as interleaved pairs, per seed (the
+    baseline's model of the same seed; :func:`bench.measure.measure_pair`), into
+    ``measured[row, seed]``'s ``paired_speedup``, ``paired_at`` and ``same_image``."""
+    from dataclasses import replace
+
+    from bench.measure import measure_pair
+
+    rows = {row.name: row for row in table.rows}
+    for row in table.rows:
+        if row.baseline is None or row.baseline == row.name:
+            continue
+        base = rows[row.baseline]
+        for seed in seed_list:
+            pair = measure_pair(entries[row.name, seed].baked, row.render,
+                                entries[base.name, seed].baked, base.render, test_set,
+                                device=args.device, repeats=args.repeats,
+                                stage=table.paired_stage, sizes=table.paired_sizes,
+                                same_image=table.same_image)
+            measured[row.name, seed] = replace(measured[row.name, seed], **pair)
+            check = pair["same_image"]
+            if check is not None and not check["identical"]:
+                print(f"bench.run: WARNING: {table.key} row {row.name!r} (seed {seed}) does "
+                      f"not render its baseline {base.name!r}'s image: max |diff| "
+                      f"{check['max_diff']:.3g}", file=sys.stderr)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -8,6 +8,8 @@
  * byte 0 occupied, else 1 + the exit level, as the mip is a max-pool and the finest cell
  * decides every level; high byte G where it is read, G_IN_CODE), skips empty space with
  * the mip and (USE_G) the occupancy distance grid G (ngprt_skip.h; paper §4.3, Eq. 9),
+ * or (MARCH_PAPER) reads the mip's levels coarse to fine and steps as the paper
+ * (ngprt_paper.h; docs/ngprt.md "The marches"),
  * and composites the 8 fused features of the occupied lanes (ngprt_features.h, Eq. 5-8)
  * until T < T_STOP (S2.5). Lanes advance independently; a finished lane idles. The lanes
  * give a CPU driver SIMD and independent work to overlap; GPUs take RAYS = 1, one ray
@@ -22,9 +24,41 @@
  *   feat[8n .. 8n+7] = (acc[0..6], opacity): diffuse rgb (3), specular (4), opacity
  *   depth[n]                         depth_acc / opacity, 0 where opacity is 0
  *   n_march[n], n_occ[n]             marching points and occupied samples
+ *   reads[3n .. 3n+2]                (COUNT_READS) global reads: occupancy, G, feature
+ *                                    corners (clrender/ngprt/marches.py)
  */
 #include "ngprt_features.h"
-#include "ngprt_skip.h"
+#include "ngprt_paper.h"
+
+#if COUNT_READS
+/* Global-memory reads of a ray so far (marches.READ_KINDS), counted only in the counting
+ * build so that the timed kernels are unchanged. */
+typedef struct {
+    vint occupancy, G, features;
+} v_reads;
+
+/* n + c in the lanes of mask, n elsewhere. */
+inline vint v_add(vint n, vint c, vint mask) { return select(n, n + c, mask); }
+
+/* The reads of one marching point of the lanes in `active` whose exit code is `code`:
+ * the paper reads levels N_MIP - 1 .. exit level (all N_MIP at a sample), ours one exit
+ * code; G where the exit level is coarser than G, unless the code carries it (ours with
+ * G_IN_CODE); a sample's features (marches.feature_reads). */
+inline void v_count_reads(v_reads *n, vint code, vint active, vint sample, vint empty)
+{
+#if MARCH_PAPER
+    n->occupancy = v_add(n->occupancy, select((vint)(N_MIP + 1) - code, (vint)(N_MIP),
+                                              sample), active);
+#else
+    n->occupancy = v_inc(n->occupancy, active);
+#endif
+#if USE_G && (MARCH_PAPER || !G_IN_CODE)
+    const vint lev = (code & 0xff) - 1;
+    n->G = v_inc(n->G, empty & VMASK(((vint)(L_C) >> lev) < G_RES));
+#endif
+    n->features = v_add(n->features, (vint)(9 + 8 * L), sample);
+}
+#endif
 
 /* End t_{k+1} of the interval of each lane's lattice point k (render_ref.next_t): an
  * unbounded ray's last interval ends at the ray's end. */
@@ -93,25 +127,36 @@ inline void ngp_write_pixel(const v_rays *r, int j, int n, __global float *feat,
 
 __kernel void ngprt_march(__global const float *cam, const int width, const int height,
                           const float s, const float near, const float far,
-                          __global const ushort *exit_code, __global const uchar *G,
+                          __global const occ_t *occupancy, __global const uchar *G,
                           __global const int *block_index, __global const float8 *blocks,
                           const int n_blocks, __global const float8 *tables,
                           __global const float *fusion,
                           __global float *feat, __global float *depth,
-                          __global int *n_march_out, __global int *n_occ_out)
+                          __global int *n_march_out, __global int *n_occ_out
+#if COUNT_READS
+                          , __global int *reads_out
+#endif
+                          )
 {
     const int px0 = (int)get_global_id(0) * RAYS, py = get_global_id(1);
     if (px0 >= width || py >= height) return;
-    ngp_model m = {exit_code, G, block_index, blocks, n_blocks, tables, fusion};
+    ngp_model m = {occupancy, G, block_index, blocks, n_blocks, tables, fusion};
     ngp_inv_sigmoids(fusion, m.inv_sig);
     v_lattice lattice;
     float8 acc[RAYS];
     v_rays r = {.lt = &lattice, .acc = acc};
     vint active = v_rays_start(&r, cam, px0 + LANE_IDS, py, width, s, near, far);
     active = active & v_marching(&r);
+#if COUNT_READS
+    v_reads reads = {(vint)(0), (vint)(0), (vint)(0)};
+#endif
     while (any(active)) {
         const v_march_point p = v_point_at(&r, r.k);
-        const vint code = v_gather_u16(m.exit_code, v_flat(p.cell, (vint)(L_C)), active);
+#if MARCH_PAPER
+        const vint code = v_paper_code(m.occupancy, p.cell, active);
+#else
+        const vint code = v_gather_u16(m.occupancy, v_flat(p.cell, (vint)(L_C)), active);
+#endif
         const vint sample = active & VMASK((code & 0xff) == 0);
         const vint empty = active & ~sample;
         /* Both counters here, outside the branches: counted inside v_composite, Intel's
@@ -119,12 +164,25 @@ __kernel void ngprt_march(__global const float *cam, const int width, const int 
          * notes"). */
         r.n_march = v_inc(r.n_march, active);
         r.n_occ = v_inc(r.n_occ, sample);
+#if COUNT_READS
+        v_count_reads(&reads, code, active, sample, empty);
+#endif
         if (any(sample)) v_composite(&m, &r, &p, sample);
+#if MARCH_PAPER
+        if (any(empty)) r.k = select(r.k, v_paper_skip(&m, &r, &p, empty, code), empty);
+#else
         if (any(empty)) r.k = select(r.k, v_skip(&m, &r, &p, empty, code), empty);
+#endif
         active = active & v_marching(&r);
     }
     FOR_LANES(j) {
         if (px0 + j >= width) break;
         ngp_write_pixel(&r, j, py * width + px0 + j, feat, depth, n_march_out, n_occ_out);
+#if COUNT_READS
+        __global int *out = reads_out + 3 * (size_t)(py * width + px0 + j);
+        out[0] = LANE_I(reads.occupancy, j);
+        out[1] = LANE_I(reads.G, j);
+        out[2] = LANE_I(reads.features, j);
+#endif
     }
 }

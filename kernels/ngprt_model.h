@@ -7,7 +7,8 @@
  *     (config.VARIANT_CODES); the hash primes HASH_PRIME_X/Y/Z (encoding.HASH_PRIMES);
  *   per model: L, L_C, LOG2_T, COARSE_BLOCK, G_RES, N_ATT (attention channels in the
  *     coarse grid), N_INV (spatially invariant logits), VARIANT, UNBOUNDED, EXTENT
- *     (ModelConfig.extent), USE_G, G_IN_CODE (render_cl.g_in_codes);
+ *     (ModelConfig.extent), USE_G, G_IN_CODE (render_cl.g_in_codes), MARCH_PAPER (the
+ *     paper's march, ngprt_paper.h, or ours), COUNT_READS (the counting build);
  *   per device: RAYS (ngprt_lanes.h), FAST_MATH (ngprt_math.h); the skip's margins come
  *     with ngprt_skip.h.
  * A missing define fails the build: an undefined name is 0 in #if, which would
@@ -31,6 +32,15 @@
     !defined(G_RES) || !defined(N_ATT) || !defined(N_INV) || !defined(VARIANT) || \
     !defined(UNBOUNDED) || !defined(EXTENT) || !defined(USE_G) || !defined(G_IN_CODE)
 #error "ngprt kernels need -D L L_C LOG2_T COARSE_BLOCK G_RES N_ATT N_INV VARIANT UNBOUNDED EXTENT USE_G G_IN_CODE"
+#endif
+#if !defined(MARCH_PAPER) || !defined(COUNT_READS)
+#error "ngprt kernels need -D MARCH_PAPER COUNT_READS (render_cl.kernel_defines)"
+#endif
+/* The occupancy the march reads: exit codes (ours) or the mip's bytes (the paper's). */
+#if MARCH_PAPER
+typedef uchar occ_t;
+#else
+typedef ushort occ_t;
 #endif
 /* The code's shape fixes these: features travel as float8 (the mlp fusion also runs its
  * hidden layer in float8 lanes); the lattice table holds the ray's start, 12 candidate
@@ -65,7 +75,8 @@
 /* The model's buffers (the kernel arguments of ngprt_march, render_cl.Renderer._upload)
  * and what every sample derives from them alone. */
 typedef struct {
-    __global const ushort *exit_code;  /* L_C^3: render_cl.exit_codes */
+    __global const occ_t *occupancy;   /* ours: L_C^3 render_cl.exit_codes; the paper's
+                                        * (MARCH_PAPER): render_cl.mip_levels */
     __global const uchar *G;           /* G_RES^3: distance to occupancy, G-voxels */
     __global const int *block_index;   /* (L_C / COARSE_BLOCK)^3: block of a cell, -1 none */
     __global const float8 *blocks;     /* n_blocks * COARSE_CORNERS^3 corners, COARSE_STRIDE */

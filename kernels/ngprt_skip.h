@@ -28,7 +28,9 @@
  * (G_IN_CODE, render_cl.exit_codes) or from G. */
 inline vint v_g_distance(const ngp_model *m, vpoint u, vint read, vint g_code)
 {
-#if USE_G && G_IN_CODE
+#if MARCH_PAPER
+    return (vint)(0);                            /* the paper's march reads G itself */
+#elif USE_G && G_IN_CODE
     return select((vint)(0), g_code, read);      /* exit_codes put it there */
 #elif USE_G
     if (any(read))

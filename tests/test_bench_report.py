@@ -17,9 +17,15 @@ def test_tables_load(key):
     assert all(set(r.paper) <= set(t.paper_columns) for r in t.rows)
 
 
-def test_table4_rows_pair_G_off_and_on():
+def test_table4_rows_are_the_three_marches_against_the_papers_without_G():
     t = ablation.load_table("table4")
-    assert [(r.model["L"], r.render["use_G"]) for r in t.rows] == [(L, g) for L in (2, 3, 4) for g in (False, True)]
+    marches = [("paper", False), ("paper", True), ("ours", True)]
+    assert [(r.model["L"], r.render["march"], r.render["use_G"]) for r in t.rows] == [
+        (L, m, g) for L in (2, 3, 4) for m, g in marches]
+    assert [r.baseline for r in t.rows] == [
+        b for L in (2, 3, 4) for b in (None, f"L={L} paper w/o G", f"L={L} paper w/o G")]
+    assert t.paired_stage == "march" and t.paired_sizes == ("1920x1080",) and t.same_image
+    assert all(not r.paper for r in t.rows if r.render["march"] == "ours")
 
 
 @pytest.mark.parametrize("preset", methods.get("ndrf").PRESETS)
@@ -72,17 +78,17 @@ def test_write_table_puts_paper_figures_beside_ours(tmp_path):
     meta = {"device": "dev", "preset": "cpu", "scene": "builtin-bounded", "resolution": "4x4",
             "git_revision": "r", "date": "d"}
     md = report.write_table(tmp_path, t, results, meta)
-    line = next(l for l in md.splitlines() if l.startswith("| L=2 w/o G"))
+    line = next(l for l in md.splitlines() if l.startswith("| L=2 paper w/o G"))
     cells = [c.strip() for c in line.strip("|").split("|")]
     assert cells[1:3] == ["20.00", "25.67"]          # PSNR ours, paper
     assert cells[3:5] == ["40.0", "85.1"]            # Marching ours, paper
     data = json.loads((tmp_path / "table4.json").read_text())
-    assert data["device"] == "dev" and len(data["rows"]) == 6
-    assert (tmp_path / "table4.csv").read_text().count("\n") == 7
+    assert data["device"] == "dev" and len(data["rows"]) == 9
+    assert (tmp_path / "table4.csv").read_text().count("\n") == 10
     assert (tmp_path / "table4.png").stat().st_size > 1000
-    assert (tmp_path / "table4" / "l-2-w-o-g.png").is_file()
+    assert (tmp_path / "table4" / "l-2-paper-w-o-g.png").is_file()
     report.write_index(tmp_path)
-    assert "table4/l-2-w-g.png" in (tmp_path / "README.md").read_text()
+    assert "table4/l-2-paper-w-g.png" in (tmp_path / "README.md").read_text()
 
 
 def test_lpips_is_reported_beside_the_paper_or_as_not_measured(tmp_path):
@@ -102,16 +108,53 @@ def test_speedup_is_baseline_time_over_row_time(tmp_path):
     t = ablation.load_table("table4")
     # w/o G rows take 12 ms, w/ G rows 10 ms: the w/ G rows are 1.2x faster.
     results = [_measured(20.0, 12.0 if not r.render["use_G"] else 10.0) for r in t.rows]
-    assert report.speedups(t, results) == [None, 1.2, None, 1.2, None, 1.2]
+    assert report.speedups(t, results) == [None, 1.2, 1.2] * 3
     paper = report.speedups(t, results, key=lambda row, m: row.paper.get("Time (ms)"))
     assert paper[1] == pytest.approx(9.98 / 9.26)
     meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4",
             "git_revision": "r", "date": "d"}
     md = report.write_table(tmp_path, t, results, meta)
-    row = next(l for l in md.splitlines() if l.startswith("| L=3 w/ G"))
+    row = next(l for l in md.splitlines() if l.startswith("| L=3 paper w/ G"))
     assert "| 1.20x | 1.11x |" in row
     data = json.loads((tmp_path / "table4.json").read_text())
-    assert data["rows"][1]["baseline"] == "L=2 w/o G" and data["rows"][1]["speedup"] == 1.2
+    assert data["rows"][1]["baseline"] == "L=2 paper w/o G" and data["rows"][1]["speedup"] == 1.2
+
+
+def _pair(ratio, lo, hi, ms_row, ms_baseline, size):
+    return {"ratio": ratio, "lo": lo, "hi": hi, "n": 8, "stage": "march", "size": size,
+            "ms_row": ms_row, "ms_baseline": ms_baseline}
+
+
+def test_paired_speedup_counts_and_images_are_printed(tmp_path):
+    t = ablation.load_table("table4")
+    results = []
+    for r in t.rows:
+        m = _measured(20.0, 12.0)
+        if r.baseline:
+            identical = r.render["march"] == "ours"
+            m = replace(m, stats={"Marching": 20.0, "Occupied": 12.5},
+                        paired_speedup=_pair(1.25, 1.1, 1.4, 4.0, 5.0, "4x4"),
+                        paired_at={"1920x1080": _pair(0.9, 0.8, 1.05, 90.0, 81.0, "1920x1080")},
+                        same_image={"identical": identical, "max_diff": 0.0 if identical
+                                    else 0.25, "views": 2})
+        results.append(m)
+    meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4",
+            "git_revision": "r", "date": "d"}
+    md = report.write_table(tmp_path, t, results, meta)
+    head = next(l for l in md.splitlines() if l.startswith("| Row"))
+    assert "march ms, test size (paired)" in head and "Speed-up at 1920x1080" in head
+    cells = lambda name: [c.strip() for c in next(
+        l for l in md.splitlines() if l.startswith(f"| {name} |")).strip("|").split("|")]
+    ours, paper_g, base = cells("L=2 ours"), cells("L=2 paper w/ G"), cells("L=2 paper w/o G")
+    assert "1.25x (1.10-1.40)" in ours and "0.90x (0.80-1.05)" in ours
+    assert "4.00" in ours and "90.00" in ours and "identical" in ours
+    assert "Marching 0.500x, Occupied 1.000x" in ours
+    assert "**DIFFERS** (max 0.25)" in paper_g
+    assert "5.00" in base and "81.00" in base               # the baseline's time, from its pairs
+    assert "interleaved pairs" in md and "bit for bit" in md
+    data = json.loads((tmp_path / "table4.json").read_text())
+    assert data["rows"][2]["paired_speedup"]["ratio"] == 1.25
+    assert data["rows"][2]["paired_at"]["1920x1080"]["lo"] == 0.8
 
 
 def _table(folder, name, columns='["PSNR"]', baseline="", model="{ variant = \"sum\", L = 2 }"):

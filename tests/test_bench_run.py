@@ -1,9 +1,11 @@
 """`python -m bench.run` end to end (slow): a small built-in scene, the `tiny` preset.
 
-Trains the three models of Table 4 once, renders with and without G, and checks what the
-table must show whatever the figures: one model per L shared by its two rows, G changing
-the marching points only (same occupied points and images), and a cached second run that
-trains nothing.
+Trains the three models of Table 4 once, renders each with the three marches, and checks
+what the table must show whatever the figures: one model per L shared by its three rows,
+the marches changing the marching points and reads only (same occupied points, images
+identical bit for bit, checked by the harness), each row with G timed against the paper's
+w/o G row as interleaved pairs at the test size and at 1920x1080, and a cached second run
+that trains nothing.
 """
 from __future__ import annotations
 
@@ -31,18 +33,32 @@ def test_table4_end_to_end(small_scene, tmp_path, capsys):
     assert run.main(args) == 0
     data = json.loads((tmp_path / "out" / "table4.json").read_text())
     rows = data["rows"]
-    assert [(r["L"], r["use_G"]) for r in rows] == [(L, g) for L in (2, 3, 4) for g in (0, 1)]
+    assert [(r["L"], r["march"], r["use_G"]) for r in rows] == [
+        (L, m, g) for L in (2, 3, 4) for m, g in (("paper", 0), ("paper", 1), ("ours", 1))]
     assert data["preset"] == "tiny" and data["resolution"] == "40x40"
-    for off, on in zip(rows[::2], rows[1::2]):
-        assert off["model_key"] == on["model_key"]
-        assert on["Occupied"] == off["Occupied"] and on["PSNR"] == pytest.approx(off["PSNR"], abs=1e-6)
-        assert on["Marching"] <= off["Marching"]
-        assert on["speedup"] == pytest.approx(off["time_ms"]["median"] / on["time_ms"]["median"])
+    for base, paper_g, ours in zip(rows[::3], rows[1::3], rows[2::3]):
+        assert base["model_key"] == paper_g["model_key"] == ours["model_key"]
+        assert base["paired_speedup"] is None and base["same_image"] is None
+        for on in (paper_g, ours):
+            assert on["Occupied"] == base["Occupied"] and on["PSNR"] == base["PSNR"]
+            assert on["same_image"] == {"identical": True, "max_diff": 0.0, "views": 2}
+            assert on["speedup"] == pytest.approx(base["time_ms"]["median"]
+                                                  / on["time_ms"]["median"])
+            for size, pair in [("40x40", on["paired_speedup"]),
+                               ("1920x1080", on["paired_at"]["1920x1080"])]:
+                assert pair["size"] == size and pair["stage"] == "march" and pair["n"] == 2
+                assert 0 < pair["lo"] <= pair["ratio"] <= pair["hi"]
+        # Ours visits no more points than the paper's w/o G and reads one code a point.
+        assert ours["Marching"] <= base["Marching"] and ours["Reads"] < base["Reads"]
+        assert ours["Skip reads"] == pytest.approx(ours["Marching"])
+        assert base["Skip reads"] > base["Marching"]
         # The table's quality is `clrender eval`'s on the cached model (one scoring loop).
-        baked = tmp_path / "cache" / "models" / on["model_key"] / "model.npz"
-        assert on["PSNR"] == pytest.approx(evaluate(baked, small_scene)["mean"]["psnr"], abs=1e-9)
+        baked = tmp_path / "cache" / "models" / ours["model_key"] / "model.npz"
+        assert ours["PSNR"] == pytest.approx(evaluate(baked, small_scene)["mean"]["psnr"],
+                                             abs=1e-9)
     assert len({r["model_key"] for r in rows}) == 3
-    assert "| L=4 w/ G |" in (tmp_path / "out" / "table4.md").read_text()
+    md = (tmp_path / "out" / "table4.md").read_text()
+    assert "| L=4 ours |" in md and md.count("| identical |") == 6
     models = sorted((tmp_path / "cache" / "models").iterdir())
     stamps = [(m / "model.npz").stat().st_mtime_ns for m in models]
     assert run.main(args) == 0                  # cached: nothing retrained or rebaked
@@ -70,7 +86,8 @@ def test_seeds_must_be_a_positive_count(capsys):
 def fake_training(monkeypatch):
     """run.main without training or rendering: every (row, seed) gets a fake model whose
     PSNR is 20 + seed; returns the (method, seed, downscale) of every ensure_model call
-    (and ("load", split, downscale) of every dataset load)."""
+    (and ("load", split, downscale) of every dataset load, ("pair", row, baseline) of every
+    paired timing, faked too)."""
     from pathlib import Path
     from types import SimpleNamespace
 
@@ -93,7 +110,14 @@ def fake_training(monkeypatch):
                          size_MB=1.0, time_note="fake", time_at={800: ms},
                          sample=np.zeros((2, 2, 3), np.float32))
 
+    def measure_pair(row_baked, row_render, base_baked, base_render, test_set, **kw):
+        calls.append(("pair", row_baked.name, base_baked.name))
+        pair = {"ratio": 1.5, "lo": 1.2, "hi": 1.9, "n": 8, "stage": "frame", "size": "4x4",
+                "ms_row": 10.0, "ms_baseline": 15.0}
+        return {"paired_speedup": pair, "paired_at": {}, "same_image": None}
+
     cam = SimpleNamespace(width=4, height=4)
+    monkeypatch.setattr(measure, "measure_pair", measure_pair)
     monkeypatch.setattr(cache, "ensure_model", ensure_model)
     monkeypatch.setattr(cache, "resolve_scene", lambda scene, root: root)
     monkeypatch.setattr(cache, "data_fingerprint", lambda path, downscale=1: f"fp{downscale}")
@@ -110,9 +134,12 @@ def fake_training(monkeypatch):
 def test_seeds_train_every_row_per_seed_and_the_index_lists_each_table(fake_training, tmp_path):
     common = ["--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
     assert run.main(["ndrf-teacher", "--seed", "5", "--seeds", "2"] + common) == 0
+    # Each seed's row timed against the same seed's baseline, after both were measured.
     assert fake_training == [("load", "test", 1), ("ngprt", 5, 1), ("ngprt", 6, 1),
-                             ("ndrf", 5, 1), ("ndrf", 6, 1)]
+                             ("ndrf", 5, 1), ("ndrf", 6, 1), ("pair", "5", "5"),
+                             ("pair", "6", "6")]
     rows = json.loads((tmp_path / "out" / "ndrf-teacher.json").read_text())["rows"]
+    assert rows[0]["paired_speedup"] is None and rows[1]["paired_speedup"]["ratio"] == 1.5
     assert rows[0]["seeds"] == [5, 6] and rows[0]["PSNR"] == 25.5
     assert [p["model_key"] for p in rows[1]["per_seed"]] == ["ndrf-5", "ndrf-6"]
     assert "25.50 ± 0.71" in (tmp_path / "out" / "ndrf-teacher.md").read_text()
@@ -146,7 +173,8 @@ def test_builtin_scene_made_once_and_again_when_the_generator_changed(tmp_path, 
 def test_downscale_reaches_the_test_set_the_models_and_their_fingerprint(fake_training, tmp_path):
     common = ["--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
     assert run.main(["ndrf-teacher", "--downscale", "4"] + common) == 0
-    assert fake_training == [("load", "test", 4), ("ngprt", 0, 4), ("ndrf", 0, 4)]
+    assert fake_training == [("load", "test", 4), ("ngprt", 0, 4), ("ndrf", 0, 4),
+                             ("pair", "0", "0")]
     assert "downscale 4" in (tmp_path / "out" / "ndrf-teacher.md").read_text()
     assert run.main(["train-curve", "--downscale", "2"] + common) == 2
 

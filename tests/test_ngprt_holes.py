@@ -122,11 +122,11 @@ def occupied_lattice_points(model, o: np.ndarray, d: np.ndarray) -> np.ndarray:
     return np.bincount(keys >> 32, minlength=len(o))
 
 
-@pytest.mark.parametrize("use_G", [False, True])
-def test_bounded_skip_never_passes_an_occupied_lattice_point(patch_model, use_G):
+@pytest.mark.parametrize("use_G,march", [(False, "ours"), (True, "ours"), (True, "paper")])
+def test_bounded_skip_never_passes_an_occupied_lattice_point(patch_model, use_G, march):
     o, d = near_axis_rays(N_RAYS, seed=int(use_G))
     want = occupied_lattice_points(patch_model, o, d)
-    got = march_reference(patch_model, o, d, use_G=use_G)["n_occ"]
+    got = march_reference(patch_model, o, d, use_G=use_G, march=march)["n_occ"]
     assert want.sum() > 3 * N_RAYS and np.count_nonzero(want) > 0.6 * N_RAYS
     # Every sample is an occupied lattice point; so equal counts mean none was skipped.
     missed = np.flatnonzero(got != want)

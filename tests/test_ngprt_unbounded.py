@@ -133,11 +133,11 @@ def walk_skip(model, k, o, d, u, exit_lev, g, s, g_end, table):
     return k
 
 
-@pytest.mark.parametrize("use_G", [True, False])
-def test_every_occupied_lattice_point_is_taken(box_model, use_G):
+@pytest.mark.parametrize("use_G,march", [(True, "ours"), (False, "ours"), (True, "paper")])
+def test_every_occupied_lattice_point_is_taken(box_model, use_G, march):
     o, d = make_rays(box_model, seed=int(use_G))
     want = occupied_lattice_points(box_model, o, d)
-    got = march_reference(box_model, o, d, use_G=use_G)
+    got = march_reference(box_model, o, d, use_G=use_G, march=march)
     assert want.sum() > N_RAYS and np.count_nonzero(want) > N_RAYS // 4
     assert np.all(got["n_march"] >= got["n_occ"])
     missed = np.flatnonzero(got["n_occ"] != want)

@@ -4,10 +4,12 @@ data race, no use of uninitialised values, no OpenCL API misuse.
 NGP-RT: generates camera rays (kernels/camera.cl) and renders a tiny random model (L_C=16,
 10x8 pixels) with every aggregation variant, both scene types (unbounded: from inside the
 unit cube and from the contracted shell): with every variant the exact build and the fast
-build with 16 rays / pixels per work-item; with separate-v also the exact build without G
-and the fast build at lane widths 1, 2, 4 and 8 (10 pixels a row: full and partly filled
-work-items at 4, 8 and 16). Every build must sample the same points (per pixel), the builds
-with G the same marching points, some of each, and the fast builds' images agree across
+build with 16 rays / pixels per work-item; with separate-v also the exact build without G,
+the fast build at lane widths 1, 2, 4 and 8 (10 pixels a row: full and partly filled
+work-items at 4, 8 and 16) and the paper's march with G (``MARCH_PAPER``) in its counting
+build (``COUNT_READS``), exact and fast at 16 lanes. Every build must sample the same
+points (per pixel), the builds of one march with G the same marching points, some of
+each, the paper's builds the same reads, and the fast builds' images agree across
 widths. Oclgrind 21.10 mis-evaluates a vector comparison mask turned into
 a number (``-(a < b)`` gives 255 per true lane, not 1), which once kept the vector march from
 starting under it; kernels/ngprt_lanes.h spells mask arithmetic with select() (which, like
@@ -65,19 +67,24 @@ for view, (scene, c2w) in enumerate(views):
         # the fast build with 16 rays / pixels per work-item. The lane code does not depend
         # on the variant (only the per-lane fusion does), so one variant, the method's,
         # also runs the exact build without G and the fast build at the other widths.
-        builds = [(True, True, None), (True, False, 16)]
+        # The paper's march (and the counting build) runs with separate-v only, too.
+        builds = [(True, True, None, "ours"), (True, False, 16, "ours")]
         if variant == "separate-v":
-            builds[1:1] = [(False, True, None)] + [(True, False, w) for w in LANE_WIDTHS[:-1]]
+            builds[1:1] = [(False, True, None, "ours")] + [
+                (True, False, w, "ours") for w in LANE_WIDTHS[:-1]]
+            builds += [(True, True, None, "paper"), (True, False, 16, "paper")]
         rgb_one = None
-        for use_G, exact, lanes in builds:
-            keep.append(Renderer(model, use_G=use_G, exact=exact, rays=lanes, deferred_vec=lanes))
+        for use_G, exact, lanes, march in builds:
+            keep.append(Renderer(model, use_G=use_G, exact=exact, rays=lanes, deferred_vec=lanes,
+                                 march=march, count_reads=march == "paper"))
             out = keep[-1].render(camera, stats=True)
             if lanes == 1:
                 rgb_one = out["rgb"]
             diff = float(np.abs(out["rgb"] - rgb_one).max()) if rgb_one is not None else 0.0
+            reads = digest(out["n_reads"]) if "n_reads" in out else "-"
             print("RENDERED", view, variant, use_G, exact, lanes, int(out["n_march"].sum()),
                   int(out["n_occ"].sum()), digest(out["n_march"]), digest(out["n_occ"]),
-                  diff, flush=True)
+                  diff, march, reads, flush=True)
 """
 ERROR = re.compile(r"invalid (read|write)|data race|uninitiali[sz]ed|runtime error|"
                    r"out of bounds|oclgrind -|error", re.IGNORECASE)
@@ -110,25 +117,30 @@ def test_kernels_clean_under_oclgrind():
     require(shutil.which("oclgrind") is not None, "oclgrind (apt install oclgrind)")
     proc, log, errors = _oclgrind(SCRIPT)
     assert_clean(proc, log, errors)
-    assert log.count("RENDERED") == 1 + 3 * (5 * 2 + 7), log[-4000:]
+    assert log.count("RENDERED") == 1 + 3 * (5 * 2 + 9), log[-4000:]
     builds = {}
     for line in log.splitlines():
         f = line.split()
-        if f[:1] == ["RENDERED"] and len(f) == 11:
+        if f[:1] == ["RENDERED"] and len(f) == 13:
             builds.setdefault((f[1], f[2]), []).append(
                 {"G": f[3] == "True", "lanes": f[5], "n_march": int(f[6]), "n_occ": int(f[7]),
-                 "march_digest": f[8], "occ_digest": f[9], "rgb_diff": float(f[10])})
+                 "march_digest": f[8], "occ_digest": f[9], "rgb_diff": float(f[10]),
+                 "march": f[11], "reads_digest": f[12]})
     assert len(builds) == 18, sorted(builds)
     for (view, variant), rows in builds.items():
-        widths = ["None", "None", "1", "2", "4", "8", "16"] if variant == "separate-v" else [
-            "None", "16"]
+        widths = ["None", "None", "1", "2", "4", "8", "16", "None", "16"] if (
+            variant == "separate-v") else ["None", "16"]
         assert [r["lanes"] for r in rows] == widths, rows
         # Every build samples the same points, pixel by pixel, and some.
         assert len({r["occ_digest"] for r in rows}) == 1 and rows[0]["n_occ"] > 0, (view, rows)
-        # With G, every build marches the same points (without it, the unbounded skip may
-        # test one more empty point, so G off is only held to marching some).
-        with_G = [r for r in rows if r["G"]]
-        assert len({r["march_digest"] for r in with_G}) == 1, (view, rows)
+        # With G, every build of one march marches the same points (without it, the
+        # unbounded skip may test one more empty point, so G off is only held to marching
+        # some); the paper's builds count the same reads.
+        for march in ("ours", "paper"):
+            with_G = [r for r in rows if r["G"] and r["march"] == march]
+            assert len({r["march_digest"] for r in with_G}) <= 1, (view, rows)
+        paper = [r for r in rows if r["march"] == "paper"]
+        assert len({r["reads_digest"] for r in paper}) == (1 if paper else 0), (view, rows)
         assert min(r["n_march"] for r in rows) > 0, (view, rows)
         # The fast build's image at every width against its one-lane image: the same
         # operations per lane; -cl-mad-enable may fuse a * b + c differently per width

@@ -170,8 +170,10 @@ def test_client_loop_shows_a_failed_frame_and_serves_on():
 def test_option_control_rebuilds_the_renderer(model):
     v = viewer.Viewer(model, port=0)
     try:
-        (name, handle, _), = v._options
-        assert name == "use_G" and handle.value is True and v.renderer.impl.use_G
+        handles = {name: handle for name, handle, _ in v._options}
+        assert list(handles) == ["use_G", "march"] and handles["march"].value == "ours"
+        handle = handles["use_G"]
+        assert handle.value is True and v.renderer.impl.use_G
         before = v.renderer
         handle.value = False                        # what a click in the page does
         assert v.renderer is not before and not v.renderer.impl.use_G

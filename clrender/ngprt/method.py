@@ -10,6 +10,7 @@ from pathlib import Path
 from ..methods import CONTRACT, Option, PaperSmoke, Stat
 from .baked import FORMAT, load_baked
 from .config import PRESETS as _MODEL_PRESETS, VARIANTS
+from .marches import MARCHES
 from .render_cl import Renderer as _CLRenderer
 
 CONTRACT = CONTRACT         # written for this version of the method contract
@@ -38,13 +39,24 @@ __all__ = ["CONTRACT", "FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "
 
 
 class Renderer(_CLRenderer):
-    """:class:`clrender.ngprt.render_cl.Renderer` with its declared options and statistics."""
+    """:class:`clrender.ngprt.render_cl.Renderer` with its declared options and statistics;
+    renders with ``stats`` count the reads per ray (the counting build, ``count_reads``)."""
 
     RENDER_OPTIONS = {"use_G": Option(bool, True, "march with the occupancy distance grid G "
-                                      "(Table 4)", flag="--no-G")}
+                                      "(Table 4)", flag="--no-G"),
+                      "march": Option(str, "ours", "the march (Table 4): ours (one exit code "
+                                      "a point, the larger skip) or the paper's (levels read "
+                                      "coarse to fine, Eq. 9)", choices=MARCHES)}
     SCALAR_STATS = {"Marching": Stat("n_march", "{:.1f}", "marching points per ray"),
-                    "Occupied": Stat("n_occ", "{:.1f}", "occupied samples per ray")}
+                    "Occupied": Stat("n_occ", "{:.1f}", "occupied samples per ray"),
+                    "Reads": Stat("n_reads", "{:.1f}", "global-memory reads per ray: "
+                                  "occupancy, G, feature corners"),
+                    "Skip reads": Stat("n_skip_reads", "{:.1f}",
+                                       "occupancy and G reads per ray")}
     TIME_NOTE = "OpenCL kernel time per frame (ray marching + deferred MLP)"
+
+    def __init__(self, model, device=None, **options):
+        super().__init__(model, device=device, count_reads=True, **options)
 
 
 def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,

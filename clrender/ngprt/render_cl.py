@@ -10,6 +10,8 @@ Examples:
     >>> r = Renderer(load_baked("model.npz"))
     >>> out = r.render(camera)           # out["rgb"]: (H, W, 3) float32
     >>> out["ms_march"], out["ms_deferred"]
+    >>> paper = Renderer(model, march="paper", use_G=True, count_reads=True)
+    >>> paper.render(camera, stats=True)["n_reads"]     # (H, W) global reads per ray
 
 References: NGP-RT (Hu et al., ECCV 2024) §4.3, S2.5.
 """
@@ -23,6 +25,7 @@ from ..device import event_ms, get_runtime, padded, work_group_size
 from .config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM, VARIANT_CODES,
                      kernel_constants)
 from .encoding import HASH_PRIMES
+from .marches import READ_KINDS, check_march, g_in_codes
 from .render_ref import BOX_MARGIN, CUBE, K_BACKOFF, K_PAST_END, REGION_SCALE
 
 F32 = np.float32
@@ -52,12 +55,14 @@ def march_constants() -> dict:
     return out
 
 
-def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1) -> tuple[dict, dict]:
+def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1,
+                   march: str = "ours", count_reads: bool = False) -> tuple[dict, dict]:
     """The ``-D`` defines of the march and deferred programs for a model config: the
     shared constants of :func:`clrender.ngprt.config.kernel_constants` and
     :func:`march_constants` (the kernels define none of their own) plus the model's
-    sizes, variant and scene, and the lanes per work-item (``rays`` for the march,
-    ``deferred_vec`` for the deferred MLP)."""
+    sizes, variant and scene, the lanes per work-item (``rays`` for the march,
+    ``deferred_vec`` for the deferred MLP), the march (:mod:`clrender.ngprt.marches`)
+    and whether the march counts its reads (``COUNT_READS``, the counting build)."""
     shared = kernel_constants()
     march = {
         **shared, **march_constants(), "L": config.L, "L_C": config.L_C,
@@ -66,6 +71,7 @@ def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1) ->
         "USE_G": bool(use_G), "G_RES": config.G_res,
         "COARSE_BLOCK": config.coarse_block, "N_ATT": config.n_attention,
         "N_INV": config.n_inv_attention, "RAYS": rays, "G_IN_CODE": g_in_codes(config),
+        "MARCH_PAPER": check_march(march) == "paper", "COUNT_READS": bool(count_reads),
     }
     return march, {**shared, "DEFERRED_VEC": deferred_vec}
 
@@ -99,14 +105,6 @@ def deferred_params(model) -> np.ndarray:
                    ((n_in, h), (h,), (h, h), (h,), (h, 3), (3,)))
 
 
-def g_in_codes(config) -> bool:
-    """Whether :func:`exit_codes` carries G: when ``L_C / G_res`` is a power of two, the G
-    voxel of a point is its finest cell shifted right (scaling by a power of two is exact
-    in float32, as for the mip levels)."""
-    ratio = config.L_C // config.G_res
-    return ratio & (ratio - 1) == 0
-
-
 def exit_codes(model, use_G: bool = True) -> np.ndarray:
     """The occupancy mip (and G) as the march reads them: one uint16 per finest cell
     (``L_C^3``, C order). Low byte: 0 where ``occupancy_0`` is occupied (a sample), else
@@ -132,6 +130,19 @@ def exit_codes(model, use_G: bool = True) -> np.ndarray:
     return code.reshape(-1)
 
 
+def mip_levels(model) -> np.ndarray:
+    """The occupancy mip as the paper's march reads it (``kernels/ngprt_paper.h``): the
+    ``N_MIP`` levels as uint8, finest first, each ``(L_C >> lev)^3`` cells in C order."""
+    cfg = model.config
+    levels = [np.asarray(model.arrays[f"occupancy_{lev}"], np.uint8) for lev in range(N_MIP)]
+    for lev, a in enumerate(levels):
+        r = cfg.L_C >> lev
+        if a.shape != (r, r, r):
+            raise ValueError(f"baked model: occupancy_{lev} has shape {a.shape}, "
+                             f"expected ({r}, {r}, {r})")
+    return np.concatenate([a.reshape(-1) for a in levels])
+
+
 def _upsampled(a: np.ndarray, factor: int) -> np.ndarray:
     """(R, R, R) grid repeated ``factor`` times along each axis, as uint16."""
     a = np.asarray(a, np.uint16)
@@ -150,6 +161,12 @@ class Renderer:
         device: OpenCL device spec or :class:`clrender.device.Runtime` (default
             ``$CLRENDER_DEVICE``).
         use_G: skip empty space with the occupancy distance grid G (paper §4.3).
+        march: ``"ours"`` (one exit code a point, the larger skip) or ``"paper"`` (the
+            levels read coarse to fine, G's step replacing the mip's: Eq. 9), see
+            :mod:`clrender.ngprt.marches`.
+        count_reads: ``render(stats=True)`` marches with the counting build
+            (``-D COUNT_READS=1``, built on first use) and returns the reads per ray;
+            renders without stats always take the timed build, which counts nothing.
         exact: build the kernels exactly (``Runtime.program(exact=True)``: what the tests
             compare with the numpy reference); default the fast build, which takes the
             same samples and differs in exp-based values by a few ulps.
@@ -161,16 +178,18 @@ class Renderer:
 
     def __init__(self, model, device=None, use_G: bool = True, exact: bool = False,
                  rays: int | None = None, deferred_vec: int | None = None,
-                 kernel_dir: str | None = None):
+                 kernel_dir: str | None = None, march: str = "ours", count_reads: bool = False):
         self.model, self.config, self.use_G = model, model.config, bool(use_G)
-        self.exact = bool(exact)
+        self.march_kind, self.count_reads = check_march(march), bool(count_reads)
+        self.exact, self._kernel_dir = bool(exact), kernel_dir
         self.runtime = rt = get_runtime(device)
         self.rays = rays or lane_width(rt.device)
         self.deferred_vec = deferred_vec or lane_width(rt.device)
         march_defs, deferred_defs = kernel_defines(self.config, self.use_G, self.deferred_vec,
-                                                   self.rays)
+                                                   self.rays, self.march_kind)
         self._march = rt.program("ngprt_march.cl", march_defs, exact,
                                  kernel_dir).kernel("ngprt_march")
+        self._counting = None
         self._deferred = rt.program("ngprt_deferred.cl", deferred_defs, exact,
                                     kernel_dir).kernel("ngprt_deferred")
         self.step = F32(model.step)
@@ -212,7 +231,8 @@ class Renderer:
         padded = np.zeros(blocks.shape[:4] + (stride,), F32)
         padded[..., :blocks.shape[4]] = blocks
         self._bufs = {
-            "occ": self._buffer(exit_codes(self.model, self.use_G)),
+            "occ": self._buffer(exit_codes(self.model, self.use_G) if self.march_kind == "ours"
+                                else mip_levels(self.model)),
             "G": self._buffer(np.asarray(arrays["G"], np.uint8)),
             "block_index": self._buffer(np.asarray(arrays["coarse_block_index"], np.int32)),
             # No block: one zero corner, so no read of a kernel is out of range.
@@ -232,20 +252,33 @@ class Renderer:
                            "depth": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n),
                            "n_march": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n),
                            "n_occ": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * n),
-                           "rgb": cl.Buffer(ctx, mf.WRITE_ONLY, 12 * n)}
+                           "rgb": cl.Buffer(ctx, mf.WRITE_ONLY, 12 * n),
+                           "reads": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * len(READ_KINDS) * n)
+                           if self.count_reads else None}
             self._frame_n = n
         cl.enqueue_copy(self.runtime.queue, self._frame["cam"], camera.packed())
         return self._frame
 
-    def _enqueue_march(self, camera, out) -> cl.Event:
+    def _counting_kernel(self):
+        """The counting build's march (``COUNT_READS``), built on first use."""
+        if self._counting is None:
+            defs, _ = kernel_defines(self.config, self.use_G, self.deferred_vec, self.rays,
+                                     self.march_kind, count_reads=True)
+            self._counting = self.runtime.program("ngprt_march.cl", defs, self.exact,
+                                                  self._kernel_dir).kernel("ngprt_march")
+        return self._counting
+
+    def _enqueue_march(self, camera, out, counted: bool = False) -> cl.Event:
         cfg, b = self.config, self._bufs
-        gsize, local = self._launch("march", self._march,
+        kernel = self._counting_kernel() if counted else self._march
+        gsize, local = self._launch("count" if counted else "march", kernel,
                                     (-(-camera.width // self.rays), camera.height))
-        return self._march(
+        return kernel(
             self.runtime.queue, gsize, local, out["cam"], np.int32(camera.width),
             np.int32(camera.height), self.step, F32(cfg.near), F32(cfg.far), b["occ"], b["G"],
             b["block_index"], b["blocks"], self.n_blocks, b["tables"], b["fusion"],
-            out["feat"], out["depth"], out["n_march"], out["n_occ"])
+            out["feat"], out["depth"], out["n_march"], out["n_occ"],
+            *((out["reads"],) if counted else ()))
 
     def _read(self, buf: cl.Buffer, shape, dtype) -> np.ndarray:
         host = np.empty(shape, dtype)
@@ -254,15 +287,19 @@ class Renderer:
 
     def march(self, camera) -> dict:
         """The march alone, for tests: ``acc`` (H*W, 7), ``opacity``, ``depth`` (H*W,)
-        float32, ``n_march``, ``n_occ`` (H*W,) int32, ``ms_march``."""
+        float32, ``n_march``, ``n_occ`` (H*W,) int32, ``ms_march``; with ``count_reads``
+        (the counting build) ``reads`` (H*W, 3) int32 (:data:`marches.READ_KINDS`)."""
         n = camera.width * camera.height
         out = self._outputs(camera)
-        event = self._enqueue_march(camera, out)
+        event = self._enqueue_march(camera, out, self.count_reads)
         feat = self._read(out["feat"], (n, 8), F32)
-        return {"acc": feat[:, :7].copy(), "opacity": feat[:, 7].copy(),
-                "depth": self._read(out["depth"], (n,), F32),
-                "n_march": self._read(out["n_march"], (n,), np.int32),
-                "n_occ": self._read(out["n_occ"], (n,), np.int32), "ms_march": event_ms(event)}
+        result = {"acc": feat[:, :7].copy(), "opacity": feat[:, 7].copy(),
+                  "depth": self._read(out["depth"], (n,), F32),
+                  "n_march": self._read(out["n_march"], (n,), np.int32),
+                  "n_occ": self._read(out["n_occ"], (n,), np.int32), "ms_march": event_ms(event)}
+        if self.count_reads:
+            result["reads"] = self._read(out["reads"], (n, len(READ_KINDS)), np.int32)
+        return result
 
     def render(self, camera, background=(1.0, 1.0, 1.0), stats: bool = False) -> dict:
         """Render one view; only ``rgb`` is read back unless ``stats`` is asked for.
@@ -276,11 +313,14 @@ class Renderer:
             kernel times in milliseconds and ``ms`` their sum. With ``stats``: ``n_march``,
             ``n_occ`` (H, W) int32 marching points and occupied samples per ray; ``depth``
             (H, W) float32 world units along the ray (0 where nothing was hit); ``opacity``
-            (H, W) float32.
+            (H, W) float32; with ``count_reads`` (the counting build's times)
+            ``reads_<kind>`` per :data:`marches.READ_KINDS`, ``n_reads`` their sum and
+            ``n_skip_reads`` the occupancy and G reads, (H, W) int32 reads per ray.
         """
         h, w, n = camera.height, camera.width, camera.width * camera.height
         out = self._outputs(camera)
-        ev_march = self._enqueue_march(camera, out)
+        counted = stats and self.count_reads
+        ev_march = self._enqueue_march(camera, out, counted)
         bg = [F32(c) for c in (background if background is not None else (1.0, 1.0, 1.0))]
         gsize, local = self._launch("deferred", self._deferred, (-(-n // self.deferred_vec),))
         ev_deferred = self._deferred(self.runtime.queue, gsize, local,
@@ -295,4 +335,10 @@ class Renderer:
                 n_occ=self._read(out["n_occ"], (h, w), np.int32),
                 depth=self._read(out["depth"], (h, w), F32),
                 opacity=self._read(out["feat"], (n, 8), F32)[:, 7].reshape(h, w).copy())
+        if counted:
+            reads = self._read(out["reads"], (h, w, len(READ_KINDS)), np.int32)
+            result.update({f"reads_{kind}": reads[..., i].copy()
+                           for i, kind in enumerate(READ_KINDS)})
+            result.update(n_reads=reads.sum(axis=2, dtype=np.int32),
+                          n_skip_reads=reads[..., :2].sum(axis=2, dtype=np.int32))
         return result

@@ -20,6 +20,8 @@ import numpy as np
 from ..camera import generate_rays
 from .config import N_MIP, T_STOP
 from .encoding import hash_corner, sh4
+from .marches import (READ_KINDS, check_march, feature_reads, g_read, g_reads_counted,
+                      occupancy_reads, paper_g_step_bounded, paper_g_step_unbounded)
 from .space import (cell_index, lattice_end, lattice_rows, lattice_s, lattice_t, lattice_table,
                     ray_box, to_grid)
 
@@ -98,9 +100,7 @@ def g_distance(model, u: np.ndarray, exit_lev: np.ndarray, use_G: bool) -> np.nd
     """(M,) int G value at u, read only when the exit level is coarser than G; else 0."""
     cfg = model.config
     g = np.zeros(len(u), np.int64)
-    if not use_G:
-        return g
-    read = (cfg.L_C >> exit_lev) < cfg.G_res
+    read = g_read(cfg, exit_lev, use_G)
     i = cell_index(u[read], cfg.G_res)
     g[read] = model.arrays["G"][i[:, 0], i[:, 1], i[:, 2]]
     return g
@@ -350,6 +350,7 @@ class _Rays:
         self.depth_acc = np.zeros(n, F32)
         self.n_march = np.zeros(n, np.int32)
         self.n_occ = np.zeros(n, np.int32)
+        self.reads = np.zeros((n, len(READ_KINDS)), np.int32)   # marches.READ_KINDS
 
 
 def next_t(model, k: np.ndarray, s: F32, g_end: np.ndarray, table=None) -> np.ndarray:
@@ -387,18 +388,25 @@ def composite(model, st: _Rays, rows, u, t, s, g_end, table=None) -> None:
     st.k[rows] = k + 1
 
 
-def march_reference(model, origins: np.ndarray, dirs: np.ndarray, use_G: bool = True) -> dict:
+def march_reference(model, origins: np.ndarray, dirs: np.ndarray, use_G: bool = True,
+                    march: str = "ours") -> dict:
     """March rays through a baked model (docs/ngprt.md "The march, per ray").
 
     Args:
         model: a :class:`clrender.ngprt.baked.BakedModel`.
         origins, dirs: (N, 3) float32 world-space rays, dirs unit length.
         use_G: skip empty space with the occupancy distance grid G as well as the mip.
+        march: ``"ours"`` or ``"paper"`` (:mod:`clrender.ngprt.marches`): what is read at
+            a point and, with G, the step (ours: the larger skip; the paper: G's replaces
+            the mip's where ``G > 0``).
     Returns:
         acc: (N, 7) float32 composited diffuse rgb (3) and specular (4) features;
         opacity: (N,) float32 in [0, 1]; depth: (N,) float32 world units along the ray
-        (0 where opacity is 0); n_march, n_occ: (N,) int32 marching / occupied points.
+        (0 where opacity is 0); n_march, n_occ: (N,) int32 marching / occupied points;
+        reads: (N, 3) int32 global-memory reads per ray (occupancy, G, feature corners:
+        :data:`clrender.ngprt.marches.READ_KINDS`).
     """
+    check_march(march)
     cfg = model.config
     unbounded = cfg.scene == "unbounded"
     o = np.ascontiguousarray(origins, F32).reshape(-1, 3)
@@ -424,24 +432,51 @@ def march_reference(model, origins: np.ndarray, dirs: np.ndarray, use_G: bool = 
             u = _point_u(cfg, o[rows], d[rows], t)
             lev = exit_level(model, u)
             occ = lev < 0
+            st.reads[rows, 0] += occupancy_reads(march, lev).astype(np.int32)
             if occ.any():
                 composite(model, st, rows[occ], u[occ], t[occ], s, g_end[rows[occ]],
                           lattice_rows(tab, occ) if unbounded else None)
+                st.reads[rows[occ], 2] += feature_reads(cfg)
             e = ~occ
             if e.any():
-                r, ue, le = rows[e], u[e], lev[e]
-                g = g_distance(model, ue, le, use_G)
-                if unbounded:
-                    st.k[r] = skip_unbounded(model, st.k[r], o[r], d[r], ue, le, g, s, g_end[r],
-                                             lattice_rows(tab, e))
-                else:
-                    st.k[r] = skip_bounded(model, st.k[r], t[e], o[r], d[r], ue, le, g, s,
-                                           g_end[r])
+                if g_reads_counted(cfg, march):
+                    st.reads[rows[e], 1] += g_read(cfg, lev[e], use_G)
+                _skip(model, st, march, rows[e], o, d, t[e], u[e], lev[e], use_G, s, g_end,
+                      lattice_rows(tab, e) if unbounded else None)
             active[rows] = (_lattice_g(st.k[rows], s) < g_end[rows]) & (st.T[rows] >= F32(T_STOP))
     with np.errstate(invalid="ignore", divide="ignore"):
         depth = np.where(st.opacity > 0, st.depth_acc / st.opacity, F32(0.0)).astype(F32)
     return {"acc": st.acc, "opacity": st.opacity, "depth": depth,
-            "n_march": st.n_march, "n_occ": st.n_occ}
+            "n_march": st.n_march, "n_occ": st.n_occ, "reads": st.reads}
+
+
+def _skip(model, st: _Rays, march: str, r, o, d, t, u, lev, use_G: bool, s, g_end,
+          table=None) -> None:
+    """Steps the empty points of rays ``r`` (at distance t, grid u, exit level lev) on:
+    ours, the larger of the mip's and G's skips; the paper's, G's step where ``G > 0``
+    (Eq. 9, :mod:`clrender.ngprt.marches`), else the mip's. ``table``: the rays' lattice
+    rows (unbounded)."""
+    g = g_distance(model, u, lev, use_G)
+    mine = np.ones(len(r), bool) if march == "ours" else g == 0
+    k = st.k[r].copy()
+    if mine.any():
+        gm = g[mine] if march == "ours" else np.zeros(int(mine.sum()), np.int64)
+        rm, tm = r[mine], lattice_rows(table, mine) if table is not None else None
+        if table is not None:
+            k[mine] = skip_unbounded(model, k[mine], o[rm], d[rm], u[mine], lev[mine], gm, s,
+                                     g_end[rm], tm)
+        else:
+            k[mine] = skip_bounded(model, k[mine], t[mine], o[rm], d[rm], u[mine], lev[mine],
+                                   gm, s, g_end[rm])
+    jump = ~mine
+    if jump.any():
+        if table is not None:
+            k[jump] = paper_g_step_unbounded(model.config, k[jump], g[jump], s,
+                                             lattice_rows(table, jump))
+        else:
+            k[jump] = paper_g_step_bounded(model.config, k[jump], t[jump], g[jump], s,
+                                           g_end[r[jump]] / s + K_PAST_END)
+    st.k[r] = k
 
 
 # ---- per pixel (Eq. 5) ------------------------------------------------------------
@@ -461,20 +496,23 @@ def deferred_reference(model, acc: np.ndarray, dirs: np.ndarray) -> np.ndarray:
     return _sigmoid(acc[:, 0:3] + h2 @ a["deferred_w2"] + a["deferred_b2"])
 
 
-def render_reference(model, camera, background=(1.0, 1.0, 1.0), use_G: bool = True) -> dict:
-    """Render a camera view with the reference renderer.
+def render_reference(model, camera, background=(1.0, 1.0, 1.0), use_G: bool = True,
+                     march: str = "ours") -> dict:
+    """Render a camera view with the reference renderer (``march``: see
+    :func:`march_reference`).
 
     Returns:
         rgb: (H, W, 3) float32, blended over ``background``; depth, opacity: (H, W)
-        float32; n_march, n_occ: (H, W) int32.
+        float32; n_march, n_occ: (H, W) int32; reads: (H, W, 3) int32.
     """
     origins, dirs = generate_rays(camera)
     H, W = camera.height, camera.width
-    out = march_reference(model, origins.reshape(-1, 3), dirs.reshape(-1, 3), use_G)
+    out = march_reference(model, origins.reshape(-1, 3), dirs.reshape(-1, 3), use_G, march)
     rgb = deferred_reference(model, out["acc"], dirs.reshape(-1, 3))
     op = out["opacity"][:, None]
     rgb = rgb * op + np.asarray(background, F32) * (F32(1.0) - op)
     res = {"rgb": rgb.astype(F32).reshape(H, W, 3)}
     for name in ("depth", "opacity", "n_march", "n_occ"):
         res[name] = out[name].reshape(H, W)
+    res["reads"] = out["reads"].reshape(H, W, len(READ_KINDS))
     return res

@@ -1,0 +1,91 @@
+/* The paper's march (-D MARCH_PAPER=1; docs/ngprt.md "The marches", paper §4.3, Fig. 3,
+ * Eq. 9; clrender/ngprt/marches.py): the occupancy levels read coarse to fine until one
+ * is empty, and with G (USE_G) G's step replacing the mip's where G > 0.
+ *
+ * The occupancy buffer holds the N_MIP levels as bytes, finest first (level lev at
+ * MIP_OFFSET(lev), (L_C >> lev)^3 cells, C order; render_cl.mip_levels).
+ */
+#ifndef CLRENDER_NGPRT_PAPER_H
+#define CLRENDER_NGPRT_PAPER_H
+#pragma OPENCL FP_CONTRACT OFF
+#include "ngprt_skip.h"
+
+/* First byte of level lev in the concatenated mip. */
+inline int ngp_mip_offset(int lev)
+{
+    int off = 0;
+    for (int l = 0; l < lev; ++l) off += (L_C >> l) * (L_C >> l) * (L_C >> l);
+    return off;
+}
+
+/* The exit code of each lane in `active` as render_cl.exit_codes' low byte (0: occupied
+ * at every level, a sample; else 1 + the first empty level, coarse to fine), from one
+ * byte read per level until one is empty (render_ref.exit_level). The cell of level lev
+ * is the finest cell shifted right by lev (scaling by 2^lev is exact). */
+inline vint v_paper_code(__global const uchar *mip, vcell cell, vint active)
+{
+    vint code = (vint)(0), undecided = active;
+    for (int lev = N_MIP - 1; lev >= 0 && any(undecided); --lev) {
+        vcell c;
+        c.x = cell.x >> lev;
+        c.y = cell.y >> lev;
+        c.z = cell.z >> lev;
+        const vint occ = v_gather_u8(mip + ngp_mip_offset(lev),
+                                     v_flat(c, (vint)(L_C >> lev)), undecided);
+        const vint empty = undecided & VMASK(occ == 0);
+        code = select(code, (vint)(1 + lev), empty);
+        undecided = undecided & ~empty;
+    }
+    return code;
+}
+
+#if USE_G
+#if !UNBOUNDED
+/* Eq. 9, bounded (marches.paper_g_step_bounded): the last lattice point within v * g of
+ * t (v = 2 / G_RES world units), at least k + 1. */
+inline vint v_paper_g_step(const v_rays *r, const v_march_point *p, vint g)
+{
+    const vfloat radius = 2.0f * VF(g) / (float)G_RES;
+    return max(r->k + 1, v_floor_i(v_min((p->t + radius) / r->s, v_k_limit(r))));
+}
+#else
+/* Eq. 9, unbounded, in contracted arc length (marches.paper_g_step_unbounded):
+ * k + floor(4 g / G_RES / s) lattice steps, at least k + 1, at most the first lattice
+ * point of the next piece of the lane's lattice (across a piece's end the contraction may
+ * jump, and arc length bounds no distance). */
+inline vint v_paper_g_step(const v_rays *r, const v_march_point *p, vint g)
+{
+    const vint n = v_floor_i(4.0f * VF(g) / (float)G_RES / r->s);
+    const vfloat sigma = v_lattice_g(r, r->k);
+    vfloat end = r->lt->cum[1];
+    for (int q = 1; q < LATTICE_BREAKS - 1; ++q)
+        end = select(end, r->lt->cum[q + 1], VMASK(r->lt->cum[q] <= sigma));
+    vint k_p = v_ceil_i(end / r->s);
+    k_p = select(k_p, k_p - 1, VMASK(v_lattice_g(r, k_p - 1) >= end));
+    return max(r->k + 1, min(r->k + n, k_p));
+}
+#endif
+#endif
+
+/* Next lattice index (> k) of the lanes in `empty`, whose exit code is `code`: with G,
+ * G's step where G is read (exit level coarser than G) and g > 0, else the mip's
+ * (v_skip, which reads no G in this build: ngprt_skip.h). */
+inline vint v_paper_skip(const ngp_model *m, const v_rays *r, const v_march_point *p,
+                         vint empty, vint code)
+{
+#if USE_G
+    const vint lev = code - 1;
+    const vint read = empty & VMASK(((vint)(L_C) >> lev) < G_RES);
+    vint g = (vint)(0);
+    if (any(read))
+        g = v_gather_u8(m->G, v_flat(v_cell(p->u, (vint)(G_RES)), (vint)(G_RES)), read);
+    const vint jump = read & VMASK(g > 0), mip = empty & ~jump;
+    vint k = r->k;
+    if (any(mip)) k = select(k, v_skip(m, r, p, mip, code), mip);
+    if (any(jump)) k = select(k, v_paper_g_step(r, p, g), jump);
+    return k;
+#else
+    return v_skip(m, r, p, empty, code);
+#endif
+}
+#endif
