@@ -22,7 +22,7 @@ def _time(m) -> float:
 def speedup(m_row, m_against, row, against) -> dict:
     """{ratio: against's time over row's (>1: row faster)}, with ``lo``, ``hi``, ``n`` where
     the row's result carries a ``paired_speedup`` against this very row (its baseline)."""
-    paired = getattr(m_row, "paired_speedup", None)
+    paired = m_row.paired_speedup
     if paired is not None and row.baseline == against.name:
         return {k: paired[k] for k in ("ratio", "lo", "hi", "n")}
     return {"ratio": _time(m_against) / _time(m_row)}

@@ -1,6 +1,6 @@
 """Ablation specs and the benchmark report writer (no training: measured values given)."""
 import json
-from dataclasses import dataclass, fields, replace
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -146,7 +146,7 @@ def test_paired_speedup_counts_and_images_are_printed(tmp_path):
     cells = lambda name: [c.strip() for c in next(
         l for l in md.splitlines() if l.startswith(f"| {name} |")).strip("|").split("|")]
     ours, paper_g, base = cells("L=2 ours"), cells("L=2 paper w/ G"), cells("L=2 paper w/o G")
-    assert "1.25x (1.10-1.40)" in ours and "0.90x (0.80-1.05)" in ours
+    assert "1.25x (1.10-1.40, 8 pairs)" in ours and "0.90x (0.80-1.05, 8 pairs)" in ours
     assert "4.00" in ours and "90.00" in ours and "identical" in ours
     assert "Marching 0.500x, Occupied 1.000x" in ours
     assert "**DIFFERS** (max 0.25)" in paper_g
@@ -325,19 +325,11 @@ def test_table3_claims_are_the_papers():
     assert mlp["speedup"] == {"ratio": pytest.approx(11.0 / 16.0)}   # MLP row 0, SepV row 5
 
 
-@dataclass(frozen=True)
-class _Paired(RowResult):
-    """A result carrying the speed-up interval of interleaved timing pairs against its
-    baseline (the field bench.measure fills where it times pairs)."""
-
-    paired_speedup: dict | None = None
-
-
 def test_a_paired_speedup_interval_is_printed_where_a_result_carries_one(tmp_path):
     t = ablation.load_table("table3")
     results = [_measured(26.0, 10.0) for _ in t.rows]
-    results[-1] = _Paired(**{f.name: getattr(results[-1], f.name) for f in fields(RowResult)},
-                          paired_speedup={"ratio": 4.05, "lo": 3.9, "hi": 4.2, "n": 20})
+    results[-1] = replace(results[-1], paired_speedup=_pair(4.05, 3.9, 4.2, 2.5, 10.1, "4x4")
+                          | {"n": 20})
     md = report.write_table(tmp_path, t, results, META)
     assert "| 4.05x (3.90-4.20, 20 pairs) | 4.21x |" in next(
         l for l in md.splitlines() if l.startswith("| Separate-Att (V) |"))

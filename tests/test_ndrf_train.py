@@ -277,7 +277,7 @@ def test_distillation_cache(tmp_path, monkeypatch):
 
 
 def test_configs_and_spec():
-    assert set(MODEL_OPTIONS) == {"thresholds", "kernel_size", "distill"}
+    assert set(MODEL_OPTIONS) == {"thresholds", "kernel_size", "distill", "outer_only"}
     cfg, tcfg, ecfg = configs("paper")
     assert tcfg.iterations == 200_000 and tcfg.n_distill == 1000 and ecfg.N == 512
     assert (tcfg.lr, tcfg.lr_final, tuple(tcfg.betas)) == (1e-3, 1e-5, (0.9, 0.999))

@@ -125,7 +125,7 @@ def test_hook_signatures_and_the_contract_version_are_checked():
     problems = methods.check(_plugin_like(ngprt, Renderer=Renderer))
     assert len(problems) == 2
     assert problems[0].startswith("Renderer(model, device=None) cannot be called as "
-                                  "Renderer(model, device=, use_G=)")
+                                  "Renderer(model, device=, use_G=, march=)")
     assert problems[1].startswith("Renderer.render(self, camera) cannot be called")
     assert methods.check(_plugin_like(ngprt, train=lambda data, out, preset, **kw: None)) == []
     teacher = methods.Teacher("mentor", "ngprt")

@@ -89,8 +89,10 @@ def test_camera_to_viser_inverts_viser_to_camera():
 
 def test_option_specs_are_the_declared_options():
     ngprt = methods.get("ngprt").Renderer
-    assert viewer.option_specs(ngprt) == [viewer.OptionSpec(
-        "use_G", bool, True, None, ngprt.RENDER_OPTIONS["use_G"].help)]
+    use_g, march = ngprt.RENDER_OPTIONS["use_G"], ngprt.RENDER_OPTIONS["march"]
+    assert viewer.option_specs(ngprt) == [
+        viewer.OptionSpec("use_G", bool, True, None, use_g.help),
+        viewer.OptionSpec("march", str, "ours", march.choices, march.help)]
     hits = methods.get("ndrf").Renderer.RENDER_OPTIONS["hits"]
     assert viewer.OptionSpec("hits", str, hits.default, hits.choices, hits.help) in \
         viewer.option_specs(methods.get("ndrf").Renderer)
