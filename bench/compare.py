@@ -70,12 +70,57 @@ def measure(table, results: list) -> list[dict]:
         t_row, t_against = row.paper.get("Time (ms)"), against.paper.get("Time (ms)")
         rec["speedup"] = speedup(m, b, row, against)
         rec["speedup_paper"] = None if t_row is None or t_against is None else t_against / t_row
+        rec["speed_verdict"] = speed_verdict(rec["speedup"], rec["speedup_paper"])
+        rec["counts"] = count_claims(row, m, against, b)
+        if table.same_image:      # the row must not change the image: no PSNR verdict
+            check = m.same_image
+            rec["claim"] = "same image"
+            rec["verdict"] = ("images not compared" if check is None else "images identical"
+                              if check["identical"] is True else "IMAGES DIFFER")
         out.append(rec)
     return out
 
 
+def speed_verdict(ours: dict, paper: float | None) -> str:
+    """Our speed-up against the paper's, on the 95% interval of interleaved pairs:
+    "reproduces" where it excludes 1 on the paper's side, "opposite" where it excludes 1 on
+    the other, "within spread" where it contains 1; "" without pairs or a paper figure."""
+    if paper is None or paper == 1.0 or "lo" not in ours:
+        return ""
+    if ours["lo"] > 1.0 or ours["hi"] < 1.0:
+        return "reproduces" if (ours["lo"] > 1.0) == (paper > 1.0) else "opposite"
+    return "within spread"
+
+
+def count_claims(row, m, against, b) -> dict:
+    """{statistic: {ours, paper (row over against), verdict}} for the statistics both the
+    paper and our renderer count (Marching, Occupied): exact counts, compared directly;
+    "reproduces" where ours moves the paper's way (or stays equal where the paper's does),
+    else "opposite" / "differs"."""
+    out = {}
+    for col in m.stats:
+        p_row, p_against = row.paper.get(col), against.paper.get(col)
+        if p_row is None or not p_against or not b.stats.get(col):
+            continue
+        ours, paper = m.stats[col] / b.stats[col], p_row / p_against
+        if paper == 1.0:
+            verdict = "reproduces" if ours == 1.0 else "differs"
+        else:
+            verdict = ("reproduces" if ours != 1.0 and (ours > 1.0) == (paper > 1.0)
+                       else "opposite")
+        out[col] = {"ours": ours, "paper": paper, "verdict": verdict}
+    return out
+
+
+def _counts_cell(rec: dict) -> str:
+    return "; ".join(f"{col} {c['ours']:.3f}x (paper {c['paper']:.3f}x): {c['verdict']}"
+                     for col, c in rec["counts"].items())
+
+
 def verdict_cell(rec: dict) -> str:
     """The verdict as printed: "underpowered" with the seeds that would resolve it."""
+    if rec["claim"] == "same image":
+        return rec["verdict"]
     if rec["n"] < 2:
         return "one seed: no verdict"
     if rec["verdict"] != "underpowered":
@@ -86,6 +131,8 @@ def verdict_cell(rec: dict) -> str:
 
 
 def claim_cell(rec: dict) -> str:
+    if rec["claim"] == "same image":
+        return "same image, bit for bit"
     return (f"equivalent within ±{rec['margin']:.2f} dB" if rec["claim"] == "equivalent"
             else "difference")
 
@@ -100,7 +147,7 @@ def markdown(records: list[dict]) -> list[str]:
     if not records:
         return []
     head = ["Comparison", "Claim", "ΔPSNR ours (dB)", "Interval", "ΔPSNR (paper)", "Verdict",
-            "Speed-up", "Speed-up (paper)"]
+            "Speed-up", "Speed-up (paper)", "Speed verdict", "Counts (row / against)"]
     lines = ["### The paper's claims", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in records:
         interval = ("" if r["lo"] is None else
@@ -109,7 +156,8 @@ def markdown(records: list[dict]) -> list[str]:
             f"{r['row']} − {r['against']}", claim_cell(r), _delta_cell(r), interval,
             "" if r["paper"] is None else f"{r['paper']:+.2f}", verdict_cell(r),
             speedup_cell(r["speedup"]),
-            "" if r["speedup_paper"] is None else f"{r['speedup_paper']:.2f}x"]) + " |")
+            "" if r["speedup_paper"] is None else f"{r['speedup_paper']:.2f}x",
+            r["speed_verdict"], _counts_cell(r)]) + " |")
     lines += ["", NOTE, ""]
     return lines
 
@@ -125,4 +173,8 @@ NOTE = ("ΔPSNR: the first row's PSNR minus the second's trained with the same s
         "lies within ± the margin, \"underpowered\" where its half-width reaches the margin. "
         "Each verdict stands alone: no correction for the number of comparisons; the seeds "
         "were fixed before the run. Speed-up: the second row's time over the first's; with "
-        "an interval where measured as interleaved pairs.")
+        "an interval where measured as interleaved pairs (95% t over the pairs' log ratios), "
+        "judged against the paper's: \"reproduces\" where the interval excludes 1 on the "
+        "paper's side. Counts: exact, row over against, judged by direction. A table whose "
+        "rows must not change the image (Table 4) has its images compared bit for bit "
+        "instead of a PSNR verdict.")

@@ -155,6 +155,20 @@ def test_paired_speedup_counts_and_images_are_printed(tmp_path):
     data = json.loads((tmp_path / "table4.json").read_text())
     assert data["rows"][2]["paired_speedup"]["ratio"] == 1.25
     assert data["rows"][2]["paired_at"]["1920x1080"]["lo"] == 0.8
+    # The claims: images compared instead of a PSNR verdict, the time judged on the pairs'
+    # interval against the paper's 9.98 / 9.26 ms, the counts exactly (paper: marching
+    # 46.7 / 85.1, occupied unchanged).
+    claim = _cells(md, "L=2 paper w/ G − L=2 paper w/o G")
+    assert claim[1] == "same image, bit for bit" and claim[5] == "IMAGES DIFFER"
+    assert claim[8] == "reproduces"
+    assert claim[9] == ("Marching 0.500x (paper 0.549x): reproduces; "
+                        "Occupied 1.000x (paper 1.000x): reproduces")
+    claim = _cells(md, "L=2 ours − L=2 paper w/o G")      # ours: no paper figures to judge by
+    assert claim[5] == "images identical" and claim[8:10] == ["", ""]
+    slow = report.compare.speed_verdict({"ratio": 0.9, "lo": 0.8, "hi": 0.95}, 1.08)
+    assert slow == "opposite"
+    assert report.compare.speed_verdict({"ratio": 1.0, "lo": 0.9, "hi": 1.1}, 1.08) == \
+        "within spread"
 
 
 def _table(folder, name, columns='["PSNR"]', baseline="", model="{ variant = \"sum\", L = 2 }"):
@@ -273,7 +287,7 @@ def test_seeds_give_mean_spread_and_the_claims_verdicts(tmp_path):
     # mean 1.033, std 0.0577: 95% interval 1.033 ± 4.303 * 0.0577 / sqrt(3) = ± 0.143
     assert _cells(md, "NGP-RT (L=3) − NGP-RT (L=2)") == [
         "NGP-RT (L=3) − NGP-RT (L=2)", "difference", "+1.03 ± 0.06", "[+0.89, +1.18] (95%)",
-        "+0.29", "reproduces", "0.92x", "0.74x"]
+        "+0.29", "reproduces", "0.92x", "0.74x", "", ""]
     assert _cells(md, "NGP-RT (L=4) − NGP-RT (L=2)")[2:6] == [
         "-1.00 ± 0.10", "[-1.25, -0.75] (95%)", "+0.41", "opposite"]
     assert "over 3 training seeds (0, 1, 2)" in md and "no correction for the number" in md
