@@ -1,7 +1,5 @@
-"""Measured limits of the OpenCL device and the bounds they put on the NGP-RT kernels.
-
-    python -m bench.limits                      # rates for the `cpu` preset's table sizes
-    python -m bench.limits --preset paper
+"""Measured limits of the OpenCL device: what any method's kernel bounds are computed at
+(bench/ngprt_bounds.py, bench/ndrf_kernels.py).
 
 Two rates, measured on the chosen device with kernels built here (fast build):
 
@@ -11,35 +9,16 @@ Two rates, measured on the chosen device with kernels built here (fast build):
 * FLOP rate: independent ``a * b + c`` chains on ``float16`` values (2 FLOPs a lane),
   the better of separate and fused multiply-add.
 
-A kernel's bound is the time its own counters need at those rates, gathers and FLOPs not
-overlapped (a lower bound for a machine that does one at a time, and at most 2x below a
-bound that overlaps them perfectly):
-
-* march: the occupancy and G reads the march counted (the counting build,
-  :mod:`clrender.ngprt.marches`: ours one uint16 exit code a point from an ``L_C^3``
-  table, G only where the code lacks it; the paper's 1 to ``N_MIP`` mip bytes a point and
-  G where the exit level is coarser than G), each at the gather rate of its table's size;
-  per occupied sample ``8 * (1 + ceil(n_attention / 8))`` coarse float8 gathers from the
-  coarse grid and 8 per fine level from the fine tables, and the FLOPs of the trilinear
-  sums and the fusion (:func:`sample_flops`);
-* deferred MLP: the MLP's FLOPs per covered pixel (opacity > 0; the kernel writes the
-  background elsewhere).
-
-Never asserts; ``bench.ngprt_kernels`` prints each kernel's time against its bound.
+Never asserts.
 """
 from __future__ import annotations
 
-import argparse
 import functools
-import json
-import math
 
 import numpy as np
 import pyopencl as cl
 
 from clrender.device import event_ms, get_runtime, padded, work_group_size
-from clrender.ngprt.config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM,
-                                   preset)
 
 F8_BYTES = 32
 # Rate kernels, specialised with -D (GATHER_STREAMS, FLOP_CHAINS) like the renderer's.
@@ -140,86 +119,3 @@ def flop_rate(device=None, repeats: int = 5, flops: float = 4e9) -> float:
                                        np.float32(0.999), np.float32(1e-3), out), repeats)
         best = max(best, gsize[0] * FLOP_CHAINS * 32 * n_iter / (ms * 1e-3))
     return best
-
-
-def table_bytes(model, march: str = "ours") -> dict:
-    """Bytes of the tables the march reads: ``occupancy`` (ours: the uint16 exit codes,
-    ``2 L_C^3``; the paper's: the ``N_MIP`` mip levels, a byte a cell), ``G``, ``coarse``
-    (the sparse coarse grid, corners padded to float8 chunks) and ``fine`` (all L hash
-    tables)."""
-    cfg = model.config
-    corners = int(np.shape(model.arrays["coarse_blocks"])[0]) * (cfg.coarse_block + 1) ** 3
-    occupancy = (2 * cfg.L_C ** 3 if march == "ours"
-                 else sum((cfg.L_C >> lev) ** 3 for lev in range(N_MIP)))
-    return {"occupancy": occupancy, "G": cfg.G_res ** 3,
-            "coarse": corners * F8_BYTES * (1 + math.ceil(cfg.n_attention / 8)),
-            "fine": cfg.L * cfg.T * F8_BYTES}
-
-
-def measure_limits(model, device=None, repeats: int = 5, march: str = "ours") -> dict:
-    """Gather rates (per second) for each of the model's table sizes (:func:`table_bytes`
-    of ``march``) and the FLOP rate."""
-    sizes = table_bytes(model, march)
-    rates = {name: gather_rate(max(nbytes, F8_BYTES), device, repeats)
-             for name, nbytes in sizes.items()}
-    return {"gathers_per_s": rates, "flops_per_s": flop_rate(device, repeats),
-            "table_bytes": sizes, "march": march, "device": get_runtime(device).name}
-
-
-def sample_flops(config) -> int:
-    """FLOPs of the features of one occupied sample: trilinear weights and sums of the
-    coarse corners and of the fine corners of every level, and the fusion."""
-    coarse_chunks = 1 + math.ceil(config.n_attention / 8)
-    per_corner = 16 * coarse_chunks                  # w * v + acc over the float8 chunks
-    weights = 8 * 2 + 6                              # wx * wy * wz per corner, 1 - w
-    trilinear = 8 * per_corner + weights + config.L * (8 * 16 + weights)
-    L = config.L
-    fusion = {"sum": 8 * L, "shared-v": 16 * L + 4 * L, "separate-v": 16 * L + 8 * L,
-              "shared-inv": 16 * L, "separate-inv": 16 * L,
-              "mlp": 2 * (FEATURES * L * FUSION_HIDDEN + FUSION_HIDDEN * FEATURES)}
-    compositing = 30                                 # sigma, alpha, weights, accumulators
-    return trilinear + fusion[config.variant] + compositing
-
-
-def march_bound(config, reads: dict, n_occ: float, limits: dict) -> dict:
-    """Bound (ms) of the march from its counters, totals over the frame: ``reads``
-    {``occupancy``, ``G``: reads the march counted (:mod:`clrender.ngprt.marches`)} and
-    ``n_occ`` samples; ``limits`` of :func:`measure_limits` for the same march."""
-    g = limits["gathers_per_s"]
-    coarse_chunks = 1 + math.ceil(config.n_attention / 8)
-    gather_s = (reads["occupancy"] / g["occupancy"] + reads["G"] / g["G"]
-                + n_occ * 8 * coarse_chunks / g["coarse"] + n_occ * 8 * config.L / g["fine"])
-    flop_s = n_occ * sample_flops(config) / limits["flops_per_s"]
-    return {"ms": 1e3 * (gather_s + flop_s), "gather_ms": 1e3 * gather_s,
-            "flop_ms": 1e3 * flop_s}
-
-
-def deferred_flops() -> int:
-    """FLOPs of the deferred MLP for one pixel (Eq. 5): three dense layers and sigmoid."""
-    n_in, h = FEATURES - 1 + SH_DIM, DEFERRED_HIDDEN
-    return 2 * (n_in * h + h * h + h * 3) + 2 * h + 10
-
-
-def deferred_bound(covered: float, limits: dict) -> dict:
-    """Bound (ms) of the deferred MLP over ``covered`` pixels (opacity > 0)."""
-    flop_s = covered * deferred_flops() / limits["flops_per_s"]
-    return {"ms": 1e3 * flop_s, "gather_ms": 0.0, "flop_ms": 1e3 * flop_s}
-
-
-def main(argv=None) -> int:
-    from clrender.ngprt.random_model import random_baked_model
-
-    p = argparse.ArgumentParser(prog="python -m bench.limits", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--preset", default="cpu")
-    p.add_argument("--device", default=None)
-    p.add_argument("--repeats", type=int, default=5)
-    args = p.parse_args(argv)
-    model = random_baked_model(preset(args.preset), 0)
-    limits = measure_limits(model, args.device, args.repeats)
-    print(json.dumps(limits, indent=2))
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

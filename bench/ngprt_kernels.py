@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.limits import deferred_bound, march_bound, measure_limits
+from bench.ngprt_bounds import deferred_bound, march_bound, measure_limits
 from bench.sizes import at_size, parse_size, trained_test_set
 from clrender.atomic import write_atomic
 from clrender.cliopts import whole_number
@@ -163,7 +163,7 @@ def bounds_note(meta: dict) -> str:
     lim = meta["limits"]
     rates = ", ".join(f"{name} {rate / 1e9:.2f} G/s ({lim['table_bytes'][name] / 2**20:.2f} MiB)"
                       for name, rate in lim["gathers_per_s"].items())
-    note = (f"Bounds (bench/limits.py): each stage's counters at the rates measured in this "
+    note = (f"Bounds (bench/ngprt_bounds.py): each stage's counters at the rates measured in this "
             f"run (random 32-byte gathers from tables of the model's sizes: {rates}; "
             f"{lim['flops_per_s'] / 1e9:.0f} GFLOP/s), gathers and FLOPs not overlapped; "
             f"ratio = time / bound.")

@@ -77,7 +77,7 @@ def test_paired_sizes_must_be_frame_sizes(tmp_path, monkeypatch):
 
 
 def test_march_bound_counts_what_each_march_reads():
-    from bench.limits import march_bound, sample_flops, table_bytes
+    from bench.ngprt_bounds import march_bound, sample_flops, table_bytes
     from clrender.ngprt.config import preset
     from clrender.ngprt.random_model import random_baked_model
 

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import importlib
 import os
-import shutil
-import threading
 import time
 from types import SimpleNamespace
 
