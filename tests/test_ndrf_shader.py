@@ -26,8 +26,9 @@ from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.hits import HitCaster
 from clrender.ndrf.random_model import random_ndrf_model
 from clrender.ndrf.shader_cl import Shader
-from clrender.ndrf.shader_ref import conv_shader, screen_buffer, shade_reference, \
-    view_encoding
+from clrender.ndrf.shader_cl import kernel_defines
+from clrender.ndrf.shader_ref import _conv, conv0_factored, conv_shader, screen_buffer, \
+    shade_reference, vertex_projections, view_encoding, view_weights
 
 RGB_ATOL = 1e-5
 VIEW_ATOL = 1e-6
@@ -261,3 +262,32 @@ def test_reference_conv_matches_torch(kernel_size):
                                a["conv1_b"]))
     expected = s[0].permute(1, 2, 0).numpy()
     np.testing.assert_allclose(conv_shader(model, buf), expected, rtol=0, atol=TORCH_ATOL)
+
+
+@pytest.mark.parametrize("kernel_size", [2, 1])
+@pytest.mark.parametrize("K", [1, 2])
+def test_conv0_factored_is_the_direct_layer(K, kernel_size):
+    """The kernel's factored conv0 (vertex projections blended by barycentrics, the view
+    term from its weights or its table) equals the direct conv of the screen buffer:
+    exactly up to float32 rounding (1e-4 on values of order 1) with the weights; with the
+    table within linear interpolation's error, bounded from the table's own second
+    differences (|f''| h^2 / 8 per component and tap) plus that rounding."""
+    model = _model(K, kernel_size)
+    _, hits, dirs = _inputs(model, *VIEWS[0])
+    a = model.arrays
+    direct = _conv(screen_buffer(model, hits.tri, hits.bary, dirs), a["conv0_w"],
+                   a["conv0_b"], False)
+    H = model.config.hidden
+    defines = kernel_defines(model.config)
+    b0 = np.zeros(defines["H_STRIDE"], np.float32)
+    b0[:H] = a["conv0_b"]
+    proj = vertex_projections(model, defines)
+    exact = conv0_factored(model, hits.tri, hits.bary, dirs, proj,
+                           view_weights(model, defines, True), b0, exact=True)
+    np.testing.assert_allclose(exact[..., :H], direct, atol=1e-4, rtol=0)
+    assert not exact[..., H:].any()                     # the padding channels stay zero
+    table = view_weights(model, defines, False)
+    fast = conv0_factored(model, hits.tri, hits.bary, dirs, proj, table, b0, exact=False)
+    second = np.abs(np.diff(table[:, :, :, 0, :H].astype(np.float64), 2, axis=1)).max(1)
+    bound = (second.sum(0) / 8).sum(0) + 1e-4            # per output channel
+    assert (np.abs(fast[..., :H] - direct) <= bound).all()

@@ -34,6 +34,7 @@ from ..device import (check_allocation, device_type_name, event_ms, get_runtime,
 from .baked import validate
 from .config import FEATURES, NDRFConfig
 from .raster_cl import packed_geometry, vertices_in_morton_order
+from .shader_ref import view_weights, vertex_projections
 
 F32, I32 = np.float32, np.int32
 KERNELS = ("ndrf_conv0", "ndrf_conv1", "ndrf_screen", "ndrf_zero_padding")
@@ -87,60 +88,6 @@ def packed_meshes(model) -> dict:
         offset += len(perm)
     return {**packed_geometry(meshes), "features": np.concatenate(features),
             "vertex_order": np.concatenate(order)}
-
-
-def vertex_projections(model, defines: dict) -> np.ndarray:
-    """conv0's weights applied to every vertex's geometry channels, per tap.
-
-    Returns (sum V_k, S*S, H_STRIDE) float32: for vertex v of mesh k and tap t,
-    W_t[features of k] @ features[v] + W_t[positions of k] @ vertices[v] (float64, then
-    rounded), zero-padded; conv0 blends these by a hit's barycentrics (linearity).
-    """
-    a, cfg = model.arrays, model.config
-    S, C, H, K = cfg.kernel_size, cfg.c_in, cfg.hidden, cfg.K
-    w = np.asarray(a["conv0_w"], np.float64).reshape(S * S, C, H)
-    out = []
-    for k in range(K):
-        vertices, _, feats = model.mesh(k)
-        p = (np.einsum("vc,tch->vth", np.asarray(feats, np.float64),
-                       w[:, FEATURES * k:FEATURES * (k + 1)])
-             + np.einsum("vc,tch->vth", np.asarray(vertices, np.float64),
-                         w[:, FEATURES * K + 3 * k:FEATURES * K + 3 * (k + 1)]))
-        out.append(p)
-    proj = np.zeros((sum(len(p) for p in out), S * S, defines["H_STRIDE"]), F32)
-    proj[..., :H] = np.concatenate(out)
-    return proj
-
-
-def view_weights(model, defines: dict, exact: bool) -> np.ndarray:
-    """conv0's view-channel weights as the kernel's build reads them.
-
-    exact: (S*S, VIEW_C, H_STRIDE) float32, the weights of the view encoding's channels.
-    Otherwise the table (3, VIEW_NODES, S*S, 2, H_STRIDE) float32: for direction component
-    c, node s_n = -1 + 2n / (VIEW_NODES - 1) and tap t, the value f(s_n) of the sum of the
-    weights of d_c, sin(2^i d_c) and cos(2^i d_c) times those functions, then the step to
-    the next node f(s_{n+1}) - f(s_n) (0 at the last; float64, then rounded): a pixel's view
-    contribution is the sum over c of this 1D function at d_c, which the kernel interpolates
-    linearly (max error ~ h^2 / 8 * |f''|, h = 2 / (VIEW_NODES - 1)) from one row pair, the
-    taps of a node side by side.
-    """
-    a, cfg = model.arrays, model.config
-    S, C, H, N = cfg.kernel_size, cfg.c_in, cfg.hidden, cfg.n_freq
-    w = np.asarray(a["conv0_w"], np.float64).reshape(S * S, C, H)[:, C - cfg.view_channels:]
-    if exact:
-        out = np.zeros((S * S, cfg.view_channels, defines["H_STRIDE"]), F32)
-        out[..., :H] = w
-        return out
-    s = np.linspace(-1.0, 1.0, defines["VIEW_NODES"])
-    table = np.zeros((3, len(s), S * S, 2, defines["H_STRIDE"]), F32)
-    for c in range(3):
-        f = s[:, None, None] * w[None, :, c]
-        for i in range(N):
-            f = (f + np.sin(2.0 ** i * s)[:, None, None] * w[None, :, 3 + 6 * i + c]
-                 + np.cos(2.0 ** i * s)[:, None, None] * w[None, :, 6 + 6 * i + c])
-        table[c, :, :, 0, :H] = f
-        table[c, :-1, :, 1, :H] = f[1:] - f[:-1]
-    return table
 
 
 def packed_weights(model, defines: dict, exact: bool) -> dict:

@@ -3,7 +3,10 @@
 Screen buffer (barycentric feature and position gather per mesh, view encoding), the
 convolutional shader (two 2x2 layers with alternated padding, or 1x1) and compositing by
 coverage, in float32 throughout. ``kernels/ndrf_shade.cl`` (driven by
-:mod:`clrender.ndrf.shader_cl`) is tested against these functions.
+:mod:`clrender.ndrf.shader_cl`) is tested against these functions. Its conv0 computes a
+factored form, read here function by function: :func:`vertex_projections` and
+:func:`view_weights` (what the kernel is given) and :func:`conv0_factored` (what it
+computes with them), equal to the layer of :func:`conv_shader` by linearity.
 
 Examples:
     >>> hits = HitCaster(model).cast_camera(camera)
@@ -16,6 +19,8 @@ Table 1), §3 (the two-pass shader).
 from __future__ import annotations
 
 import numpy as np
+
+from .config import FEATURES
 
 F32 = np.float32
 
@@ -135,3 +140,104 @@ def shade_reference(model, tri: np.ndarray, bary: np.ndarray, dirs: np.ndarray,
     bg = np.asarray(background, F32).reshape(3)
     return (coverage * s + (F32(1.0) - coverage) * bg).astype(F32)
 
+
+# ---- conv0 factored by linearity, as kernels/ndrf_shade.cl computes it ----------------
+
+def vertex_projections(model, defines: dict) -> np.ndarray:
+    """conv0's weights applied to every vertex's geometry channels, per tap.
+
+    Returns (sum V_k, S*S, H_STRIDE) float32: for vertex v of mesh k and tap t,
+    W_t[features of k] @ features[v] + W_t[positions of k] @ vertices[v] (float64, then
+    rounded), zero-padded; conv0 blends these by a hit's barycentrics (linearity).
+    """
+    a, cfg = model.arrays, model.config
+    S, C, H, K = cfg.kernel_size, cfg.c_in, cfg.hidden, cfg.K
+    w = np.asarray(a["conv0_w"], np.float64).reshape(S * S, C, H)
+    out = []
+    for k in range(K):
+        vertices, _, feats = model.mesh(k)
+        p = (np.einsum("vc,tch->vth", np.asarray(feats, np.float64),
+                       w[:, FEATURES * k:FEATURES * (k + 1)])
+             + np.einsum("vc,tch->vth", np.asarray(vertices, np.float64),
+                         w[:, FEATURES * K + 3 * k:FEATURES * K + 3 * (k + 1)]))
+        out.append(p)
+    proj = np.zeros((sum(len(p) for p in out), S * S, defines["H_STRIDE"]), F32)
+    proj[..., :H] = np.concatenate(out)
+    return proj
+
+
+def view_weights(model, defines: dict, exact: bool) -> np.ndarray:
+    """conv0's view-channel weights as the kernel's build reads them.
+
+    exact: (S*S, VIEW_C, H_STRIDE) float32, the weights of the view encoding's channels.
+    Otherwise the table (3, VIEW_NODES, S*S, 2, H_STRIDE) float32: for direction component
+    c, node s_n = -1 + 2n / (VIEW_NODES - 1) and tap t, the value f(s_n) of the sum of the
+    weights of d_c, sin(2^i d_c) and cos(2^i d_c) times those functions, then the step to
+    the next node f(s_{n+1}) - f(s_n) (0 at the last; float64, then rounded): a pixel's view
+    contribution is the sum over c of this 1D function at d_c, which the kernel interpolates
+    linearly (max error ~ h^2 / 8 * |f''|, h = 2 / (VIEW_NODES - 1)) from one row pair, the
+    taps of a node side by side.
+    """
+    a, cfg = model.arrays, model.config
+    S, C, H, N = cfg.kernel_size, cfg.c_in, cfg.hidden, cfg.n_freq
+    w = np.asarray(a["conv0_w"], np.float64).reshape(S * S, C, H)[:, C - cfg.view_channels:]
+    if exact:
+        out = np.zeros((S * S, cfg.view_channels, defines["H_STRIDE"]), F32)
+        out[..., :H] = w
+        return out
+    s = np.linspace(-1.0, 1.0, defines["VIEW_NODES"])
+    table = np.zeros((3, len(s), S * S, 2, defines["H_STRIDE"]), F32)
+    for c in range(3):
+        f = s[:, None, None] * w[None, :, c]
+        for i in range(N):
+            f = (f + np.sin(2.0 ** i * s)[:, None, None] * w[None, :, 3 + 6 * i + c]
+                 + np.cos(2.0 ** i * s)[:, None, None] * w[None, :, 6 + 6 * i + c])
+        table[c, :, :, 0, :H] = f
+        table[c, :-1, :, 1, :H] = f[1:] - f[:-1]
+    return table
+
+
+def conv0_factored(model, tri: np.ndarray, bary: np.ndarray, dirs: np.ndarray,
+                   proj: np.ndarray, w_view: np.ndarray, b0: np.ndarray,
+                   exact: bool = True) -> np.ndarray:
+    """conv0's output before the ReLU, computed as the kernel does: for each tap t and
+    input pixel q (padding bottom/right), the barycentric blend of the hit vertices' rows
+    of ``proj`` per mesh, plus the view term: the view encoding at q times ``w_view[t]``
+    (exact build), or the sum over direction components c of the table's 1D function at
+    d_c, interpolated linearly between its nodes (fast build).
+
+    Args:
+        tri, bary, dirs: as :func:`screen_buffer`.
+        proj, w_view: :func:`vertex_projections`, :func:`view_weights` (``exact`` picks
+            its form); b0: (H_STRIDE,) bias.
+    Returns:
+        (H, W, H_STRIDE) float32 (float64 sums, then rounded).
+    """
+    cfg = model.config
+    S, h, w = cfg.kernel_size, tri.shape[1], tri.shape[2]
+    geo = np.zeros((h, w, S * S, proj.shape[-1]))
+    offset = 0
+    for k in range(cfg.K):
+        vertices, faces, _ = model.mesh(k)
+        rows = proj[offset:offset + len(vertices)].astype(np.float64)
+        geo += _barycentric(rows.reshape(len(rows), -1), faces, tri[k],
+                            bary[k]).astype(np.float64).reshape(geo.shape)
+        offset += len(vertices)
+    if exact:
+        view = np.einsum("hwc,tco->hwto", view_encoding(dirs, cfg.n_freq).astype(np.float64),
+                         w_view.astype(np.float64))
+    else:
+        n = w_view.shape[1]
+        pos = (np.clip(dirs.astype(np.float64), -1.0, 1.0) + 1.0) * 0.5 * (n - 1)
+        node = np.minimum(np.floor(pos).astype(np.int64), n - 1)
+        frac = pos - node
+        view = sum(w_view[c, node[..., c], :, 0].astype(np.float64)
+                   + frac[..., c, None, None] * w_view[c, node[..., c], :, 1]
+                   for c in range(3))
+    per_tap = geo + view                                    # (H, W, taps, H_STRIDE)
+    padded = np.pad(per_tap, ((0, S - 1), (0, S - 1), (0, 0), (0, 0)))
+    out = np.broadcast_to(b0.astype(np.float64), (h, w, proj.shape[-1])).copy()
+    for dy in range(S):
+        for dx in range(S):
+            out += padded[dy:dy + h, dx:dx + w, dy * S + dx]
+    return out.astype(F32)
