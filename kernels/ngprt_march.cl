@@ -53,7 +53,7 @@ inline void v_count_reads(v_reads *n, vint code, vint active, vint sample, vint 
     n->occupancy = v_inc(n->occupancy, active);
 #endif
 #if USE_G && (MARCH_PAPER || !G_IN_CODE)
-    const vint lev = (code & 0xff) - 1;
+    const vint lev = CODE_LEVEL(code) - 1;
     n->G = v_inc(n->G, empty & VMASK(((vint)(L_C) >> lev) < G_RES));
 #endif
     n->features = v_add(n->features, (vint)(9 + 8 * L), sample);
@@ -157,7 +157,7 @@ __kernel void ngprt_march(__global const float *cam, const int width, const int 
 #else
         const vint code = v_gather_u16(m.occupancy, v_flat(p.cell, (vint)(L_C)), active);
 #endif
-        const vint sample = active & VMASK((code & 0xff) == 0);
+        const vint sample = active & VMASK(CODE_LEVEL(code) == 0);
         const vint empty = active & ~sample;
         /* Both counters here, outside the branches: counted inside v_composite, Intel's
          * CPU compiler (2026.2, RAYS = 1, no G) lost n_occ (docs/performance.md "Vendor

@@ -33,9 +33,13 @@
     !defined(UNBOUNDED) || !defined(EXTENT) || !defined(USE_G) || !defined(G_IN_CODE)
 #error "ngprt kernels need -D L L_C LOG2_T COARSE_BLOCK G_RES N_ATT N_INV VARIANT UNBOUNDED EXTENT USE_G G_IN_CODE"
 #endif
-#if !defined(MARCH_PAPER) || !defined(COUNT_READS)
-#error "ngprt kernels need -D MARCH_PAPER COUNT_READS (render_cl.kernel_defines)"
+#if !defined(MARCH_PAPER) || !defined(COUNT_READS) || !defined(CODE_G_SHIFT)
+#error "ngprt kernels need -D MARCH_PAPER COUNT_READS CODE_G_SHIFT (render_cl.kernel_defines)"
 #endif
+/* An exit code (render_cl.exit_codes): 1 + its exit level (0: occupied) below
+ * CODE_G_SHIFT, the G value read with it above. */
+#define CODE_LEVEL(code) ((code) & ((1 << CODE_G_SHIFT) - 1))
+#define CODE_G(code) ((code) >> CODE_G_SHIFT)
 /* The occupancy the march reads: exit codes (ours) or the mip's bytes (the paper's). */
 #if MARCH_PAPER
 typedef uchar occ_t;
@@ -61,6 +65,7 @@ typedef ushort occ_t;
 #define HASH_Y ((uint)(HASH_PRIME_Y))
 #define HASH_Z ((uint)(HASH_PRIME_Z))
 #define EXTENT_F ((float)(EXTENT))
+#define SIDE_F (2.0f * EXTENT_F)         /* the grid's side: [-EXTENT, EXTENT]^3 */
 /* A coarse corner holds 8 + N_ATT channels; the renderer pads each corner to a
  * multiple of 8 floats (COARSE_STRIDE) so every read is an aligned float8. */
 #define ATT_VEC ((N_ATT + 7) / 8)                 /* float8 chunks of attention logits */

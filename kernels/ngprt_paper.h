@@ -42,10 +42,10 @@ inline vint v_paper_code(__global const uchar *mip, vcell cell, vint active)
 #if USE_G
 #if !UNBOUNDED
 /* Eq. 9, bounded (marches.paper_g_step_bounded): the last lattice point within v * g of
- * t (v = 2 / G_RES world units), at least k + 1. */
+ * t (v = SIDE_F / G_RES world units), at least k + 1. */
 inline vint v_paper_g_step(const v_rays *r, const v_march_point *p, vint g)
 {
-    const vfloat radius = 2.0f * VF(g) / (float)G_RES;
+    const vfloat radius = SIDE_F * VF(g) / (float)G_RES;
     return max(r->k + 1, v_floor_i(v_min((p->t + radius) / r->s, v_k_limit(r))));
 }
 #else

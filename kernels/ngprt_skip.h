@@ -56,7 +56,7 @@ typedef struct {
  * operations of v_point_u, bounded). */
 inline bool ngp_in_cell(const ngp_ray *r, int k, int res, int3 cell)
 {
-    const float3 u = (r->o + ((float)k * r->s) * r->d + EXTENT_F) / (2.0f * EXTENT_F);
+    const float3 u = (r->o + ((float)k * r->s) * r->d + EXTENT_F) / SIDE_F;
     const float hi = (float)(res - 1);
     const float3 v = u * (float)res;
     const int3 c = (int3)((int)(v.x < 0.0f ? 0.0f : (v.x > hi ? hi : v.x)),
@@ -87,8 +87,8 @@ inline vint v_cell_exit(const v_rays *r, const v_march_point *p, vint empty, vin
     const vpoint d = r->d;
     const float s = r->s;
     const vint res = (vint)(L_C) >> lev;
-    /* 2 / res: L_C >> lev = L_C / 2^lev exactly, and scaling by 2^lev is exact. */
-    const vfloat h = (2.0f / (float)L_C) * VF((vint)(1) << lev);
+    /* SIDE_F / res: L_C >> lev = L_C / 2^lev exactly, and scaling by 2^lev is exact. */
+    const vfloat h = (SIDE_F / (float)L_C) * VF((vint)(1) << lev);
     vcell i;
     i.x = p->cell.x >> lev;
     i.y = p->cell.y >> lev;
@@ -125,11 +125,11 @@ inline vint v_cell_exit(const v_rays *r, const v_march_point *p, vint empty, vin
 inline vint v_skip(const ngp_model *m, const v_rays *r, const v_march_point *p, vint empty,
                    vint code)
 {
-    const vint lev = (code & 0xff) - 1;
+    const vint lev = CODE_LEVEL(code) - 1;
     const vint k_next = v_cell_exit(r, p, empty, lev);
-    const vint g = v_g_distance(m, p->u, empty & VMASK(((vint)(L_C) >> lev) < G_RES), code >> 8);
+    const vint g = v_g_distance(m, p->u, empty & VMASK(((vint)(L_C) >> lev) < G_RES), CODE_G(code));
     if (!any(VMASK(g > 0))) return k_next;
-    const vfloat radius = 2.0f * VF(g) / (float)G_RES;
+    const vfloat radius = SIDE_F * VF(g) / (float)G_RES;
     const vint k_g = v_floor_i(v_min((p->t + radius) / r->s, v_k_limit(r)));
     return select(k_next, max(k_next, k_g), VMASK(g > 0));
 }
@@ -197,17 +197,19 @@ inline vfloat v_box_exit(float3 o, vpoint d, vfloat t, vpoint lo, vpoint hi)
 inline vfloat v_boxes_exit(const v_rays *r, vfloat tk, vint walking, vcell cell, vint res,
                            vpoint u, vint cube, vfloat half_side)
 {
-    const vfloat size = 4.0f / VF(res);           /* a cell, in contracted units */
+    const vfloat size = SIDE_F / VF(res);         /* a cell, in contracted units */
     const vfloat margin = size * BOX_MARGIN;
     const vfloat ix = VF(cell.x), iy = VF(cell.y), iz = VF(cell.z);
-    const vpoint lo = {ix * size - 2.0f + margin, iy * size - 2.0f + margin,
-                       iz * size - 2.0f + margin};
-    const vpoint hi = {(ix + 1.0f) * size - 2.0f - margin, (iy + 1.0f) * size - 2.0f - margin,
-                       (iz + 1.0f) * size - 2.0f - margin};
+    const vpoint lo = {ix * size - EXTENT_F + margin, iy * size - EXTENT_F + margin,
+                       iz * size - EXTENT_F + margin};
+    const vpoint hi = {(ix + 1.0f) * size - EXTENT_F - margin,
+                       (iy + 1.0f) * size - EXTENT_F - margin,
+                       (iz + 1.0f) * size - EXTENT_F - margin};
     vfloat T = v_box_exit(r->o, r->d, tk, lo, hi);
     const vint in_cube = walking & cube;
     if (any(in_cube)) {
-        const vfloat cx = u.x * 4.0f - 2.0f, cy = u.y * 4.0f - 2.0f, cz = u.z * 4.0f - 2.0f;
+        const vfloat cx = u.x * SIDE_F - EXTENT_F, cy = u.y * SIDE_F - EXTENT_F,
+                     cz = u.z * SIDE_F - EXTENT_F;
         const vpoint c_lo = {cx - half_side, cy - half_side, cz - half_side};
         const vpoint c_hi = {cx + half_side, cy + half_side, cz + half_side};
         T = select(T, v_max(T, v_box_exit(r->o, r->d, tk, c_lo, c_hi)), in_cube);
@@ -224,16 +226,16 @@ inline vfloat v_boxes_exit(const v_rays *r, vfloat tk, vint walking, vcell cell,
 inline vint v_skip(const ngp_model *m, const v_rays *r, const v_march_point *p, vint empty,
                    vint code)
 {
-    const vint lev = (code & 0xff) - 1;
+    const vint lev = CODE_LEVEL(code) - 1;
     const vint res = (vint)(L_C) >> lev;
     vcell cell;
     cell.x = p->cell.x >> lev;
     cell.y = p->cell.y >> lev;
     cell.z = p->cell.z >> lev;
     const vpoint u = p->u;
-    const vint g = v_g_distance(m, u, empty & VMASK(res < G_RES), code >> 8);
+    const vint g = v_g_distance(m, u, empty & VMASK(res < G_RES), CODE_G(code));
     const vfloat radius = VF(g) / (float)G_RES;   /* u is in [0, 1]^3 */
-    const vfloat half_side = 4.0f * radius * CUBE - 4.0f / (float)G_RES * BOX_MARGIN;
+    const vfloat half_side = SIDE_F * radius * CUBE - SIDE_F / (float)G_RES * BOX_MARGIN;
     const vint cube = VMASK(g > 0) & VMASK(half_side > 0.0f);
     const vfloat lim = v_k_limit(r);
     vint k = r->k, walking = empty;

@@ -62,9 +62,9 @@ inline vpoint v_point_u(float3 o, vpoint d, vfloat t)
 #if UNBOUNDED
     p = v_contract(p);
 #endif
-    p.x = (p.x + EXTENT_F) / (2.0f * EXTENT_F);
-    p.y = (p.y + EXTENT_F) / (2.0f * EXTENT_F);
-    p.z = (p.z + EXTENT_F) / (2.0f * EXTENT_F);
+    p.x = (p.x + EXTENT_F) / SIDE_F;
+    p.y = (p.y + EXTENT_F) / SIDE_F;
+    p.z = (p.z + EXTENT_F) / SIDE_F;
     return p;
 }
 

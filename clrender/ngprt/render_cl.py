@@ -42,12 +42,19 @@ def lane_width(device, cap: int = 16) -> int:
     return max(w for w in LANE_WIDTHS if w <= min(width, cap))
 
 
+# The exit code's layout (:func:`exit_codes`): its level in the bits below CODE_G_SHIFT,
+# G above them (-D CODE_G_SHIFT; kernels/ngprt_model.h's CODE_LEVEL / CODE_G read it).
+CODE_G_SHIFT = 8
+
+
 def march_constants() -> dict:
     """The march's constants shared with the numpy reference, as ``-D`` defines: the hash
-    primes (:data:`clrender.ngprt.encoding.HASH_PRIMES`) and the skip's back-off and
-    margins (:mod:`clrender.ngprt.render_ref`, ``kernels/ngprt_skip.h``); floats as
-    float32 literals."""
+    primes (:data:`clrender.ngprt.encoding.HASH_PRIMES`), the exit code's layout
+    (:data:`CODE_G_SHIFT`) and the skip's back-off and margins
+    (:mod:`clrender.ngprt.render_ref`, ``kernels/ngprt_skip.h``); floats as float32
+    literals."""
     out = {f"HASH_PRIME_{axis}": int(p) for axis, p in zip("XYZ", HASH_PRIMES)}
+    out["CODE_G_SHIFT"] = CODE_G_SHIFT
     for name, value in (("K_BACKOFF", K_BACKOFF), ("K_PAST_END", K_PAST_END),
                         ("BOX_MARGIN", BOX_MARGIN), ("REGION_SCALE", REGION_SCALE),
                         ("CUBE", CUBE)):
@@ -107,7 +114,7 @@ def deferred_params(model) -> np.ndarray:
 
 def exit_codes(model, use_G: bool = True) -> np.ndarray:
     """The occupancy mip (and G) as the march reads them: one uint16 per finest cell
-    (``L_C^3``, C order). Low byte: 0 where ``occupancy_0`` is occupied (a sample), else
+    (``L_C^3``, C order). Low byte (bits below :data:`CODE_G_SHIFT`): 0 where ``occupancy_0`` is occupied (a sample), else
     ``1 + exit level``, the coarsest empty level (docs/ngprt.md "The march"); the mip is
     a max-pool (validated), so the empty levels of a point are 0 .. exit level, all
     decided by its finest cell: one read per lattice point instead of up to five. High
@@ -126,7 +133,8 @@ def exit_codes(model, use_G: bool = True) -> np.ndarray:
     if use_G and g_in_codes(cfg):
         G = _upsampled(np.asarray(model.arrays["G"], np.uint16), cfg.L_C // cfg.G_res)
         exit_res = cfg.L_C >> np.maximum(code.astype(np.int64) - 1, 0)
-        code |= np.where((code > 0) & (exit_res < cfg.G_res), G << 8, 0).astype(np.uint16)
+        code |= np.where((code > 0) & (exit_res < cfg.G_res), G << CODE_G_SHIFT,
+                         0).astype(np.uint16)
     return code.reshape(-1)
 
 
