@@ -56,7 +56,7 @@ class StageClock:
             x.register_hook(lambda g: self._events.append((time.perf_counter(), name)))
         return x
 
-    def backward(self, loss, first: str = "losses") -> None:
+    def run_backward(self, loss, first: str = "losses") -> None:
         """``loss.backward()``, its time split by the marked stages (``first`` until the
         first marked gradient arrives)."""
         self._events = [(time.perf_counter(), first)]
@@ -83,5 +83,5 @@ def backward(loss) -> None:
     if _active is None:
         loss.backward()
     else:
-        _active.backward(loss)
+        _active.run_backward(loss)
 
