@@ -384,3 +384,32 @@ def test_on_step_hook_fires_after_every_step_and_changes_nothing(tmp_path, one_t
     assert with_hook["gamma"] == plain["gamma"] == calls[-1][1]
     torch.testing.assert_close(with_hook["occ_ema"], plain["occ_ema"], rtol=0, atol=0)
     torch.testing.assert_close(with_hook["model"], plain["model"], rtol=0, atol=0)
+
+
+@pytest.mark.slow
+def test_fast_engine_model_bakes_and_renders_like_torch(tiny_run, tmp_path):
+    """A `tiny` model trained with engine="fast" (fused C++ grid lookups, 60 steps),
+    baked: its OpenCL render and the torch-engine evaluation of its checkpoint >= 40 dB
+    apart (as every variant above); the engine is recorded in config.json."""
+    import json
+
+    from clrender.metrics import psnr
+    from clrender.ngprt.bake import bake_run
+    from clrender.ngprt.baked import load_baked
+    from clrender.ngprt.model import render_image
+    from clrender.ngprt.render_cl import Renderer
+    from clrender.ngprt.train import load_run, train
+
+    pytest.importorskip("clrender.ngprt.fused")
+    run = train(tiny_run["data"], tmp_path / "run", preset="tiny", iterations=60,
+                device="cpu", progress=False, engine="fast")
+    assert json.loads((run / "config.json").read_text())["engine"] == "fast"
+    baked = load_baked(bake_run(run, tmp_path / "model.npz", n_rays=4096))
+    model, _, _, _ = load_run(run, "cpu")
+    assert model.engine.name == "torch"
+    occ0 = torch.from_numpy(baked.arrays["occupancy_0"] != 0)
+    for cam in tiny_run["test"].cameras:
+        ref = render_image(model, cam, occ0, baked.gamma, step=baked.step)["rgb"]
+        got = Renderer(baked).render(cam)["rgb"]
+        assert psnr(got, ref) >= 40.0
+        assert ref.std() > 0.01                      # a model that learned something
