@@ -132,14 +132,12 @@ class NGPRT(nn.Module):
                 uniq, inv = torch.unique(ids.reshape(-1), return_inverse=True)
                 ucorn = torch.stack([uniq // ((R + 1) * (R + 1)), (uniq // (R + 1)) % (R + 1),
                                      uniq % (R + 1)], -1)
-        if corner_grid is not None:
-            vals = corner_grid[ids]
-        else:
-            with stage("aux"):
-                cv = mark(self.corner_values(ucorn), "aux")
-            vals = cv[inv].reshape(*ids.shape, self.cfg.coarse_channels)
+        if corner_grid is not None:                 # no gradient (the occupancy update)
+            return ops.corner_gather(corner_grid, ids, w)
+        with stage("aux"):
+            cv = mark(self.corner_values(ucorn), "aux")
         with stage("coarse"):
-            return mark((vals * w[..., None]).sum(1), "coarse")
+            return mark(self.engine.corner_gather(cv, inv.reshape(ids.shape), w), "coarse")
 
     @torch.no_grad()
     def all_corner_values(self, chunk: int = 1 << 16) -> torch.Tensor:
