@@ -413,3 +413,32 @@ def test_fast_engine_model_bakes_and_renders_like_torch(tiny_run, tmp_path):
         got = Renderer(baked).render(cam)["rgb"]
         assert psnr(got, ref) >= 40.0
         assert ref.std() > 0.01                      # a model that learned something
+
+
+def test_run_resumes_under_the_other_engine(tmp_path):
+    """A checkpoint written by the torch engine resumes under the fast one (the engine is
+    free in the run's config; config.json then names the new engine)."""
+    import json
+    from dataclasses import replace
+
+    from clrender.data import make_scene
+    from clrender.ngprt.train import TRAIN_PRESETS, train
+
+    pytest.importorskip("clrender.ngprt.fused")
+    data = make_scene("bounded", tmp_path / "scene", seed=0, n_train=4, n_test=1, width=16,
+                      height=16)
+    tcfg = replace(TRAIN_PRESETS["tiny"], iterations=4, checkpoint_every=2, log_every=1)
+
+    def stop(step, *_):
+        if step == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(data, tmp_path / "run", preset="tiny", device="cpu", progress=False,
+              train_config=tcfg, on_step=stop)
+    run = train(data, tmp_path / "run", preset="tiny", device="cpu", progress=False,
+                train_config=tcfg, engine="fast")
+    steps = [json.loads(line)["step"] for line in (run / "log.jsonl").read_text().splitlines()]
+    assert steps == [0, 1, 2, 2, 3]                     # resumed from the step-2 checkpoint
+    assert json.loads((run / "config.json").read_text())["engine"] == "fast"
+    assert torch.load(run / "checkpoint.pt", weights_only=True)["step"] == 4

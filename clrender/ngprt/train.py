@@ -261,7 +261,8 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
     run = RunFolder(out, {"method": "ngprt", "model": cfg.to_dict(), "train": asdict(tcfg),
                           "data": data_path, "downscale": downscale,
                           "preset": preset, "seed": seed, "engine": engine,
-                          "background": [float(v) for v in ds.background]})
+                          "background": [float(v) for v in ds.background]},
+                    free=("engine",))
     model = NGPRT(cfg).to(dev)
     model.engine = engines.get(engine, dev)
     opt = make_optimizer(model, tcfg)
