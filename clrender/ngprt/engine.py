@@ -51,4 +51,10 @@ def get(name: str, device) -> Engine:
         return TORCH
     from . import fused
 
+    try:
+        fused.build()
+    except Exception as e:          # the compiler's or ninja's own message, with ours
+        raise RuntimeError(f"the fast engine's C++ extension ({fused.SOURCE.name}) did not "
+                           f"build (it needs g++ and ninja; --engine torch trains without "
+                           f"them): {e}") from e
     return Engine("fast", fused.grid_lookup, ops.weighted_gather)
