@@ -57,10 +57,12 @@ class RunFolder:
 
     Attributes:
         dir, config_path, checkpoint_path, log_path: the folder and its files.
-        resumable: ``config.json`` exists and equals ``config``.
+        resumable: ``config.json`` exists and equals ``config`` but for the keys in
+            ``free`` (settings a run may resume under another value of, e.g. the
+            training engine; ``config.json`` then records the new one).
     """
 
-    def __init__(self, out, config: dict):
+    def __init__(self, out, config: dict, free: tuple = ()):
         if "method" not in config:
             raise ValueError(f"{out}: a run's config must name its method")
         self.dir = Path(out)
@@ -69,8 +71,9 @@ class RunFolder:
         self.config_path = self.dir / "config.json"
         self.checkpoint_path = self.dir / "checkpoint.pt"
         self.log_path = self.dir / "log.jsonl"
+        fixed = lambda d: {k: v for k, v in d.items() if k not in free}   # noqa: E731
         self.resumable = self.config_path.is_file() and \
-            json.loads(self.config_path.read_text()) == self.config
+            fixed(json.loads(self.config_path.read_text())) == fixed(self.config)
         self._log, self._t0 = None, 0.0
 
     def write_config(self) -> None:

@@ -10,6 +10,7 @@ from pathlib import Path
 from ..methods import CONTRACT, Option, PaperSmoke, Stat
 from .baked import FORMAT, load_baked
 from .config import PRESETS as _MODEL_PRESETS, VARIANTS
+from .engine import ENGINES
 from .marches import MARCHES
 from .render_cl import Renderer as _CLRenderer
 
@@ -19,6 +20,8 @@ DEFAULT_PRESET = "cpu"
 TRAIN_OPTIONS = {
     "variant": Option(str, "separate-v", "feature aggregation (Table 3)", choices=VARIANTS),
     "L": Option(int, 2, "fine hash levels L", flag="--levels"),
+    "engine": Option(str, "torch", "training engine: torch (autograd, the reference) or fast "
+                     "(fused C++ grid lookups, CPU)", choices=ENGINES),
 }
 TEACHER = None
 ABLATIONS = Path(__file__).resolve().parent / "ablations"
@@ -26,9 +29,11 @@ CURVE_TABLE = "table2"
 LEGACY_RUNS = True          # runs written before config.json named the method are NGP-RT's
 _HERE, _PACKAGE = Path(__file__).resolve().parent, Path(__file__).resolve().parent.parent
 # What trains and bakes a model (bench's cache key): model, torch ops, encoding, space,
-# training, baking, the baked format, the data loaders and the run folder.
+# training (its engines and stage clock), baking, the baked format, the data loaders and
+# the run folder.
 SOURCES = (*(_HERE / f for f in ("config.py", "model.py", "torch_ops.py", "encoding.py",
-                                 "space.py", "train.py", "bake.py", "baked.py")),
+                                 "space.py", "train.py", "engine.py", "fused.py",
+                                 "fused_grid.cpp", "stages.py", "bake.py", "baked.py")),
            _PACKAGE / "data", _PACKAGE / "runs.py", _PACKAGE / "camera.py")
 
 __all__ = ["CONTRACT", "FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER",
@@ -61,13 +66,15 @@ class Renderer(_CLRenderer):
 
 def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
           iterations: int | None = None, torch_device=None, progress: bool = True,
-          on_step=None, downscale: int = 1, variant: str = "separate-v", L: int = 2):
+          on_step=None, downscale: int = 1, variant: str = "separate-v", L: int = 2,
+          engine: str = "torch"):
     """Train an NGP-RT run (:func:`clrender.ngprt.train.train`); ``on_step(step, bake)`` as
     :data:`clrender.methods.StepHook` (``bake()``: the training state baked in memory)."""
     from .train import train as train_ngprt
 
     return train_ngprt(data, out, preset=preset, variant=variant, L=L, iterations=iterations,
                        seed=seed, device=torch_device, progress=progress, downscale=downscale,
+                       engine=engine,
                        on_step=None if on_step is None else _step_hook(data, on_step, downscale))
 
 
@@ -106,22 +113,25 @@ def check_model_options(options: dict) -> None:
     """Raise ValueError unless ``options`` are NGP-RT model options (``variant``, ``L``)."""
     unknown = sorted(set(options) - set(TRAIN_OPTIONS))
     if unknown:
-        raise ValueError(f"unknown NGP-RT model options {unknown}; expected variant, L")
+        raise ValueError(f"unknown NGP-RT model options {unknown}; expected variant, L, "
+                         f"engine")
     for name, value in options.items():
         TRAIN_OPTIONS[name].check(name, value)
     if options.get("L", 2) < 1:
         raise ValueError(f"L must be an integer >= 1, got {options['L']!r}")
 
 
-def model_spec(preset: str, variant: str = "separate-v", L: int = 2) -> dict:
-    """Everything but data and seed that determines a trained model (the cache key)."""
+def model_spec(preset: str, variant: str = "separate-v", L: int = 2,
+               engine: str = "torch") -> dict:
+    """Everything but data and seed that determines a trained model (the cache key, which
+    names the training engine)."""
     from dataclasses import asdict
 
     from .config import preset as model_preset
     from .train import TRAIN_PRESETS
 
     return {"model": model_preset(preset, variant=variant, L=L).to_dict(),
-            "train": asdict(TRAIN_PRESETS[preset])}
+            "train": asdict(TRAIN_PRESETS[preset]), "engine": engine}
 
 
 def add_commands(subparsers) -> None:

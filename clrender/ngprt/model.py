@@ -16,6 +16,8 @@ from torch import nn
 
 from .config import DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, SH_DIM, ModelConfig
 from . import torch_ops as ops
+from .engine import TORCH, Engine
+from .stages import mark, stage
 
 
 class _TruncExp(torch.autograd.Function):
@@ -69,22 +71,23 @@ class AuxNGP(nn.Module):
         self.w0, self.b0 = _linear(n * cfg.aux_features, cfg.aux_hidden)
         self.w1, self.b1 = _linear(cfg.aux_hidden, cfg.coarse_channels)
 
-    def encode(self, u: torch.Tensor) -> torch.Tensor:
+    def encode(self, u: torch.Tensor, engine: Engine = TORCH) -> torch.Tensor:
         """(N, levels * features) hash features at grid coordinates u (N, 3) of L_C-grid
-        corners (``corner / L_C``)."""
-        f = ops.grid_lookup(self.tables, u, self.resolutions, self.dense, self.on_vertices)
+        corners (``corner / L_C``), looked up by ``engine``."""
+        f = engine.grid_lookup(self.tables, u, self.resolutions, self.dense, self.on_vertices)
         return f.reshape(len(u), f.shape[1] * f.shape[2])
 
-    def forward(self, u: torch.Tensor) -> torch.Tensor:
+    def forward(self, u: torch.Tensor, engine: Engine = TORCH) -> torch.Tensor:
         """(N, 8 + n_attention) raw coarse channels at grid coordinates u (N, 3) of L_C-grid
         corners."""
-        h = torch.relu(self.encode(u) @ self.w0 + self.b0)
+        h = torch.relu(self.encode(u, engine) @ self.w0 + self.b0)
         return h @ self.w1 + self.b1
 
 
 class NGPRT(nn.Module):
     """NGP-RT: coarse (auxiliary NGP at L_C corners) + attention-fused fine hash features,
-    deferred shading.
+    deferred shading. ``engine`` (:mod:`clrender.ngprt.engine`, not saved with the model)
+    computes the grid lookups: the torch reference by default.
 
     Examples:
         >>> model = NGPRT(preset("tiny"))
@@ -95,6 +98,7 @@ class NGPRT(nn.Module):
     def __init__(self, cfg: ModelConfig):
         super().__init__()
         self.cfg = cfg
+        self.engine = TORCH
         self.aux = AuxNGP(cfg)
         self.fine_tables = _uniform((cfg.L, cfg.T, FEATURES), 1e-4)
         if cfg.n_inv_attention:
@@ -111,7 +115,7 @@ class NGPRT(nn.Module):
     # -- coarse -----------------------------------------------------------------------
     def corner_values(self, corners: torch.Tensor) -> torch.Tensor:
         """(M, C) coarse channels at integer L_C-grid corners (M, 3) (what is baked)."""
-        return self.aux(corners.to(torch.float32) / float(self.cfg.L_C))
+        return self.aux(corners.to(torch.float32) / float(self.cfg.L_C), self.engine)
 
     def coarse(self, u: torch.Tensor, corner_grid: torch.Tensor | None = None) -> torch.Tensor:
         """(N, C) coarse channels at u: trilinear over the 8 corners of the L_C cell.
@@ -120,17 +124,20 @@ class NGPRT(nn.Module):
         ((L_C+1)^3, C), e.g. from :meth:`all_corner_values`, corners are read from it.
         """
         R = self.cfg.L_C
-        base = ops.cell_index(u, R)
-        corners, w = ops.trilinear_corners(u * float(R), base)
-        ids = (corners[..., 0] * (R + 1) + corners[..., 1]) * (R + 1) + corners[..., 2]
-        if corner_grid is not None:
-            vals = corner_grid[ids]
-        else:
-            uniq, inv = torch.unique(ids.reshape(-1), return_inverse=True)
-            ucorn = torch.stack([uniq // ((R + 1) * (R + 1)), (uniq // (R + 1)) % (R + 1),
-                                 uniq % (R + 1)], -1)
-            vals = self.corner_values(ucorn)[inv].reshape(*ids.shape, self.cfg.coarse_channels)
-        return (vals * w[..., None]).sum(1)
+        with stage("corners"):
+            base = ops.cell_index(u, R)
+            corners, w = ops.trilinear_corners(u * float(R), base)
+            ids = (corners[..., 0] * (R + 1) + corners[..., 1]) * (R + 1) + corners[..., 2]
+            if corner_grid is None:
+                uniq, inv = torch.unique(ids.reshape(-1), return_inverse=True)
+                ucorn = torch.stack([uniq // ((R + 1) * (R + 1)), (uniq // (R + 1)) % (R + 1),
+                                     uniq % (R + 1)], -1)
+        if corner_grid is not None:                 # no gradient (the occupancy update)
+            return ops.corner_gather(corner_grid, ids, w)
+        with stage("aux"):
+            cv = mark(self.corner_values(ucorn), "aux")
+        with stage("coarse"):
+            return mark(self.engine.corner_gather(cv, inv.reshape(ids.shape), w), "coarse")
 
     @torch.no_grad()
     def all_corner_values(self, chunk: int = 1 << 16) -> torch.Tensor:
@@ -144,7 +151,7 @@ class NGPRT(nn.Module):
     # -- fine -------------------------------------------------------------------------
     def fine(self, u: torch.Tensor) -> torch.Tensor:
         """(N, L, 8) fine features f^l at u, trilinear over hashed corners of R_l."""
-        return ops.grid_lookup(self.fine_tables, u, self.cfg.fine_resolutions)
+        return self.engine.grid_lookup(self.fine_tables, u, self.cfg.fine_resolutions)
 
     def fuse(self, fine: torch.Tensor, coarse: torch.Tensor) -> torch.Tensor:
         """(N, 8) fused fine feature by ``variant`` (docs/ngprt.md "Fusion", Eq. 7-8)."""
@@ -174,7 +181,10 @@ class NGPRT(nn.Module):
             feat: (N, 7) diffuse rgb (3) + specular (4), pre-activation.
         """
         c = self.coarse(u, corner_grid)
-        f = c[:, :FEATURES] + self.fuse(self.fine(u), c)            # Eq. 6
+        with stage("fine"):
+            fine = mark(self.fine(u), "fine")
+        with stage("fusion"):
+            f = mark(c[:, :FEATURES] + self.fuse(fine, c), "fusion")  # Eq. 6
         return trunc_exp(f[:, 0]), f[:, 1:]
 
     # -- per pixel --------------------------------------------------------------------
@@ -209,16 +219,20 @@ def render_rays(model: NGPRT, origins: torch.Tensor, dirs: torch.Tensor,
     """
     cfg, n = model.cfg, len(origins)
     s = float(torch.tensor(gamma * cfg.s0 if step is None else step, dtype=torch.float32))
-    ray_ids, k, t, delta, u = ops.lattice_samples(
-        origins, dirs, occupancy, s, cfg.near, cfg.far, cfg.extent, cfg.scene == "unbounded")
+    with stage("rays"):
+        ray_ids, k, t, delta, u = ops.lattice_samples(
+            origins, dirs, occupancy, s, cfg.near, cfg.far, cfg.extent, cfg.scene == "unbounded")
     sigma, feat = model.sample(u)
-    w, T = ops.composite_weights(sigma, delta, ray_ids, n, t_stop, return_T=True)
-    acc = ops.accumulate(w[:, None] * feat, ray_ids, n)
-    opacity = ops.accumulate(w, ray_ids, n)
-    depth = ops.accumulate(w * t, ray_ids, n)
-    depth = torch.where(opacity > 0, depth / torch.clamp(opacity, min=1e-12),
-                        torch.zeros_like(depth))
-    rgb = model.shade(acc, dirs) * opacity[:, None] + background * (1.0 - opacity[:, None])
+    with stage("compositing"):
+        w, T = ops.composite_weights(sigma, delta, ray_ids, n, t_stop, return_T=True)
+        acc = mark(ops.accumulate(w[:, None] * feat, ray_ids, n), "compositing")
+        opacity = mark(ops.accumulate(w, ray_ids, n), "compositing")
+        depth = ops.accumulate(w * t, ray_ids, n)
+        depth = torch.where(opacity > 0, depth / torch.clamp(opacity, min=1e-12),
+                            torch.zeros_like(depth))
+    with stage("shading"):
+        rgb = model.shade(acc, dirs) * opacity[:, None] + background * (1.0 - opacity[:, None])
+        rgb = mark(rgb, "shading")
     taken = ray_ids if t_stop is None else ray_ids[T >= t_stop]
     n_occ = torch.bincount(taken, minlength=n)
     return {"rgb": rgb, "opacity": opacity, "depth": depth, "n_occ": n_occ,

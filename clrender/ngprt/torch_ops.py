@@ -320,6 +320,13 @@ class _WeightedGather(torch.autograd.Function):
         return grad, None, None
 
 
+def corner_gather(values: torch.Tensor, idx: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+    """(N, C) ``sum_j w[n, j] * values[idx[n, j]]`` by indexing (differentiable in
+    ``values``): the coarse channels' trilinear sum over the L_C corners (idx (N, 8) into
+    the batch's unique corners, values (M, C))."""
+    return (values[idx] * w[..., None]).sum(1)
+
+
 def weighted_gather(table: torch.Tensor, idx: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
     """(N, F) ``sum_j w[n, j] * table[idx[n, j]]`` for a (rows, F) table, idx (N, J) int64
     and w (N, J); differentiable in ``table`` only (also NDRF's per-vertex features)."""

@@ -23,9 +23,11 @@ import torch
 import torch.nn.functional as F
 
 from ..runs import RunFolder, mse_psnr, pick_device, set_lr, training_data
+from . import engine as engines
 from . import torch_ops as ops
 from .config import ModelConfig, preset as model_preset
 from .model import NGPRT, render_rays
+from .stages import backward, mark, stage
 
 
 @dataclass(frozen=True)
@@ -229,13 +231,15 @@ def load_run(run_dir, device=None):
 def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 2,
           iterations: int | None = None, seed: int = 0, device=None,
           train_config: TrainConfig | None = None, progress: bool = True,
-          on_step=None, downscale: int = 1) -> Path:
+          on_step=None, downscale: int = 1, engine: str = "torch") -> Path:
     """Train an NGP-RT model on the dataset folder ``data`` (or a loaded Dataset) into the
     run folder ``out`` (:class:`clrender.runs.RunFolder`).
 
     An existing checkpoint in ``out`` with the same config is resumed.
 
     Args:
+        engine: ``torch`` (autograd, the reference) or ``fast`` (:mod:`clrender.ngprt.engine`;
+            recorded in ``config.json``; a checkpoint resumes under either).
         downscale: the dataset's ``images_{downscale}/`` or its images shrunk that many
             times (:func:`clrender.data.load_dataset`); recorded in ``config.json``.
         on_step: called as ``on_step(step, model, occ, gamma)`` after every iteration
@@ -256,10 +260,12 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
         tcfg = replace(tcfg, iterations=int(iterations))
     run = RunFolder(out, {"method": "ngprt", "model": cfg.to_dict(), "train": asdict(tcfg),
                           "data": data_path, "downscale": downscale,
-                          "preset": preset, "seed": seed,
-                          "background": [float(v) for v in ds.background]})
+                          "preset": preset, "seed": seed, "engine": engine,
+                          "background": [float(v) for v in ds.background]},
+                    free=("engine",))
     model = NGPRT(cfg).to(dev)
-    opt = torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas), eps=tcfg.eps)
+    model.engine = engines.get(engine, dev)
+    opt = make_optimizer(model, tcfg)
     occ, gamma, start = OccupancyGrid(cfg, dev), tcfg.gamma_init, 0
     state = run.resume(model, opt, dev)
     if state is not None:
@@ -271,38 +277,73 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
     return run.dir
 
 
+def make_optimizer(model: NGPRT, tcfg: TrainConfig) -> torch.optim.Adam:
+    """Adam over every parameter (S2.4); on the CPU torch's fused Adam, the same update in
+    one pass (3.7x faster than the default for the cpu model's 6 M parameters, 4.2 vs
+    15.7 ms a step, measured on a shared machine; parameters within 6e-8 of the default's
+    after 12 steps)."""
+    cpu = all(p.device.type == "cpu" for p in model.parameters())
+    return torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas),
+                            eps=tcfg.eps, fused=True if cpu else None)
+
+
+def train_step(model, opt, occ, gamma: float, n_rays: int, step: int, sampler, tcfg) -> dict:
+    """One iteration: occupancy update where due, a batch of ``n_rays`` rays, the loss
+    (S2.2), its backward and the optimiser step; each stage reported to
+    :mod:`clrender.ngprt.stages`.
+
+    Returns:
+        dict with ``loss`` (0-d tensor), ``rgb`` (R, 3) and ``target`` (R, 3) detached,
+        ``n_samples``, ``n_bar`` (samples per ray with samples), ``eta``, ``lr``.
+    """
+    if step % tcfg.occ_every == 0:
+        with stage("occupancy"):
+            occ.update(model, step, tcfg.occ_warmup, tcfg.occ_fraction, tcfg.occ_decay,
+                       tcfg.occ_threshold)
+    lr, eta = schedule(step, tcfg)
+    set_lr(opt, lr)
+    with stage("rays"):
+        o, d, target, bg = sampler.sample(n_rays)
+    r = render_rays(model, o, d, occ.binary, gamma, bg)
+    with stage("losses"):
+        s = float(torch.tensor(gamma * model.cfg.s0, dtype=torch.float32))
+        lo, hi = ops.distortion_intervals(r["k"], r["t"], r["delta"], s,
+                                          model.cfg.scene == "unbounded")
+        dist = ops.distortion_loss(mark(r["weights"], "compositing"), lo, hi, r["ray_ids"],
+                                   n_rays)
+        colour = F.huber_loss(r["rgb"], target, delta=tcfg.huber_delta)
+        loss = colour + eta * dist.mean()
+    opt.zero_grad(set_to_none=True)
+    backward(loss)
+    with stage("optimiser"):
+        opt.step()
+    n_samples, hit = len(r["ray_ids"]), int((r["n_occ"] > 0).sum())
+    # Rays that cross only empty space (background) carry no samples at any step
+    # size, so the average of Eq. S3 is taken over the rays that have samples.
+    return {"loss": loss.detach(), "rgb": r["rgb"].detach(), "target": target,
+            "n_samples": n_samples, "n_bar": n_samples / max(1, hit), "eta": eta, "lr": lr}
+
+
+def next_rays(n_rays: int, n_samples: int, tcfg: TrainConfig) -> int:
+    """Rays of the next batch: scaled so it holds about ``target_samples`` samples (S2.4)."""
+    return int(min(tcfg.max_rays, max(64, n_rays * tcfg.target_samples / max(1, n_samples))))
+
+
 def _loop(model, opt, occ, gamma, start, sampler, tcfg, run, progress, on_step=None):
     n_rays = min(tcfg.max_rays, 1024)
     for step in run.steps(start, tcfg.iterations, tcfg.log_every, tcfg.checkpoint_every,
                           "train", progress):
-        if step % tcfg.occ_every == 0:
-            occ.update(model, step, tcfg.occ_warmup, tcfg.occ_fraction, tcfg.occ_decay,
-                       tcfg.occ_threshold)
-        lr, eta = schedule(step, tcfg)
-        set_lr(opt, lr)
-        o, d, target, bg = sampler.sample(n_rays)
-        r = render_rays(model, o, d, occ.binary, gamma, bg)
-        s = float(torch.tensor(gamma * model.cfg.s0, dtype=torch.float32))
-        lo, hi = ops.distortion_intervals(r["k"], r["t"], r["delta"], s,
-                                          model.cfg.scene == "unbounded")
-        dist = ops.distortion_loss(r["weights"], lo, hi, r["ray_ids"], n_rays)
-        colour = F.huber_loss(r["rgb"], target, delta=tcfg.huber_delta)
-        loss = colour + eta * dist.mean()
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        n_samples, hit = len(r["ray_ids"]), int((r["n_occ"] > 0).sum())
-        # Rays that cross only empty space (background) carry no samples at any step
-        # size, so the average of Eq. S3 is taken over the rays that have samples.
-        n_bar = n_samples / max(1, hit)
+        out = train_step(model, opt, occ, gamma, n_rays, step, sampler, tcfg)
+        loss, n_bar, n_samples, lr, eta = (out[k] for k in ("loss", "n_bar", "n_samples", "lr",
+                                                            "eta"))
         gamma = tune_gamma(gamma, n_bar, tcfg)
-        n_rays_used = len(o)
-        n_rays = int(min(tcfg.max_rays, max(64, n_rays * tcfg.target_samples / max(1, n_samples))))
-        psnr = mse_psnr(float(F.mse_loss(r["rgb"].detach(), target)))
-        run.bar.set_postfix(loss=f"{float(loss.detach()):.4f}", psnr=f"{psnr:.2f}",
+        n_rays_used = len(out["rgb"])
+        n_rays = next_rays(n_rays, n_samples, tcfg)
+        psnr = mse_psnr(float(F.mse_loss(out["rgb"], out["target"])))
+        run.bar.set_postfix(loss=f"{float(loss):.4f}", psnr=f"{psnr:.2f}",
                             gamma=f"{gamma:.3f}", spr=f"{n_bar:.1f}")
         run.after_step(step, lambda: {
-            "loss": float(loss.detach()), "psnr": psnr, "gamma": gamma,
+            "loss": float(loss), "psnr": psnr, "gamma": gamma,
             "samples_per_ray": n_bar, "rays": n_rays_used, "samples": n_samples, "eta": eta,
             "lr": lr, "occupied": float(occ.binary.float().mean())},
             lambda: {"model": model.state_dict(), "optimizer": opt.state_dict(),
