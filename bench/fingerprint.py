@@ -21,6 +21,9 @@ from pathlib import Path
 from clrender import methods
 
 C_COMMENT = re.compile(r"//[^\n]*|/\*.*?\*/", re.S)
+_CLRENDER = Path(methods.__file__).resolve().parent
+# What every method's training runs of the shell: the data loaders, cameras, the run folder.
+SHELL_SOURCES = (_CLRENDER / "data", _CLRENDER / "camera.py", _CLRENDER / "runs.py")
 
 
 def normalised(path: Path) -> bytes:
@@ -65,11 +68,12 @@ def source_fingerprint(sources) -> str:
 
 @functools.lru_cache(maxsize=None)
 def code_fingerprint(method: str) -> str:
-    """The fingerprint of what trains a model of ``method``: its declared ``SOURCES`` and
-    the torch version (cached per process: the sources do not change under a run)."""
+    """The fingerprint of what trains a model of ``method``: its declared ``SOURCES``, the
+    shell's :data:`SHELL_SOURCES` and the torch version (cached per process: the sources do
+    not change under a run)."""
     import torch
 
     plugin = methods.get(method)
-    sources = methods.declared(plugin, "SOURCES")
+    sources = (*methods.declared(plugin, "SOURCES"), *SHELL_SOURCES)
     return hashlib.sha256(f"{source_fingerprint(sources)} torch={torch.__version__}"
                           .encode()).hexdigest()[:16]

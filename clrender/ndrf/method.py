@@ -34,19 +34,19 @@ ABLATIONS = Path(__file__).resolve().parent / "ablations"
 CURVE_TABLE = "ndrf-table3"
 LIBRARIES = ("embreex", "trimesh", "fast-simplification", "scikit-image")
 _PACKAGE = Path(__file__).resolve().parent.parent
-# What trains and bakes a model (bench's cache key): all of NDRF, and, since distillation
-# views are rendered by NGP-RT's OpenCL renderer, that renderer and the kernels; the data
-# loaders and the run folder. (A teacher's own code keys the teacher, whose key is in ours.)
-SOURCES = (Path(__file__).resolve().parent, _PACKAGE / "ngprt" / "render_cl.py",
-           _PACKAGE / "ngprt" / "baked.py", _PACKAGE / "ngprt" / "config.py",
-           _PACKAGE / "ngprt" / "space.py", Path(str(resources.files("clrender.kernels"))),
-           _PACKAGE / "data",
-           _PACKAGE / "runs.py", _PACKAGE / "camera.py", _PACKAGE / "device.py")
+# What trains and bakes a model (bench's cache key, beside the shell's data loaders and
+# run folder): all of NDRF, and, since distillation views are rendered by NGP-RT's OpenCL
+# renderer, that renderer and the kernels. (A teacher's own code keys the teacher, whose
+# key is in ours.)
+SOURCES = (Path(__file__).resolve().parent,
+           *(_PACKAGE / "ngprt" / f for f in ("render_cl.py", "baked.py", "config.py",
+                                              "space.py", "marches.py")),
+           Path(str(resources.files("clrender.kernels"))), _PACKAGE / "device.py")
+
 __all__ = ["CONTRACT", "FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER",
            "ABLATIONS", "CURVE_TABLE", "LIBRARIES", "SOURCES", "PAPER_SMOKE", "Renderer",
-           "load_baked",
-           "train", "train_steps", "bake_run", "check_model_options", "model_spec",
-           "add_commands", "example_model"]
+           "load_baked", "train", "train_steps", "bake_run", "check_model_options",
+           "model_spec", "add_commands", "example_model"]
 
 
 def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,

@@ -27,20 +27,17 @@ TEACHER = None
 ABLATIONS = Path(__file__).resolve().parent / "ablations"
 CURVE_TABLE = "table2"
 LEGACY_RUNS = True          # runs written before config.json named the method are NGP-RT's
-_HERE, _PACKAGE = Path(__file__).resolve().parent, Path(__file__).resolve().parent.parent
-# What trains and bakes a model (bench's cache key): model, torch ops, encoding, space,
-# training (its engines and stage clock), baking, the baked format, the data loaders and
-# the run folder.
-SOURCES = (*(_HERE / f for f in ("config.py", "model.py", "torch_ops.py", "encoding.py",
-                                 "space.py", "train.py", "engine.py", "fused.py",
-                                 "fused_grid.cpp", "stages.py", "bake.py", "baked.py")),
-           _PACKAGE / "data", _PACKAGE / "runs.py", _PACKAGE / "camera.py")
+# What trains and bakes a model (bench's cache key, beside the shell's data loaders and
+# run folder): model, torch ops, encoding, space, training (its engines and stage clock),
+# baking and the baked format.
+SOURCES = tuple(Path(__file__).resolve().parent / f for f in (
+    "config.py", "model.py", "torch_ops.py", "encoding.py", "space.py", "train.py",
+    "engine.py", "fused.py", "fused_grid.cpp", "stages.py", "bake.py", "baked.py"))
 
 __all__ = ["CONTRACT", "FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER",
            "ABLATIONS", "CURVE_TABLE", "LEGACY_RUNS", "SOURCES", "PAPER_SMOKE", "Renderer",
-           "load_baked",
-           "train", "train_steps", "bake_run", "check_model_options", "model_spec",
-           "add_commands", "example_model"]
+           "load_baked", "train", "train_steps", "bake_run", "check_model_options",
+           "model_spec", "add_commands", "example_model"]
 
 
 class Renderer(_CLRenderer):
