@@ -84,7 +84,8 @@ def time_pairs(row, base, cameras, repeats: int, stage: str | None, background=N
     each camera rendered by both back to back, the order swapped every pair, after one
     warm-up render each; the time is the renderer's ``ms_<stage>`` (``stage`` None: the
     frame's ``ms``). Returns :func:`speedup_interval` of base / row with ``stage``,
-    ``size`` ("WxH") and ``ms_row``, ``ms_baseline`` (medians over the pairs)."""
+    ``size`` ("WxH"), ``ms_row``, ``ms_baseline`` (medians over the pairs) and ``ratios``
+    (each pair's, so seeds pool their pairs: :func:`bench.seeds.aggregate`)."""
     key = "ms" if stage is None else f"ms_{stage}"
     for cam in cameras[:1]:
         row.render(cam, background=background)
@@ -98,7 +99,8 @@ def time_pairs(row, base, cameras, repeats: int, stage: str | None, background=N
     out = speedup_interval(np.asarray(theirs) / np.asarray(mine))
     cam = cameras[0]
     return {**out, "stage": stage or "frame", "size": f"{cam.width}x{cam.height}",
-            "ms_row": float(np.median(mine)), "ms_baseline": float(np.median(theirs))}
+            "ms_row": float(np.median(mine)), "ms_baseline": float(np.median(theirs)),
+            "ratios": [float(r) for r in np.asarray(theirs) / np.asarray(mine)]}
 
 
 def compare_images(row, base, test_set) -> dict:

@@ -23,10 +23,10 @@ def _mean(values: list):
     other numbers averaged (None if any seed has None), dicts field by field, anything else
     (sample render, model key) the first seed's."""
     first = values[0]
-    if isinstance(first, dict):
-        return {k: _mean([v.get(k) for v in values]) for k in first}
     if any(v is None for v in values):
         return None
+    if isinstance(first, dict):
+        return {k: _mean([v.get(k) for v in values]) for k in first}
     if isinstance(first, np.ndarray):
         return first
     if all(v == first for v in values):
@@ -45,8 +45,25 @@ def aggregate(per_seed: list[RowResult], seeds: list[int]) -> RowResult:
         raise ValueError(f"aggregate: {len(per_seed)} measurements for seeds {seeds}")
     means = {f.name: _mean([getattr(m, f.name) for m in per_seed]) for f in fields(RowResult)
              if f.name not in ("seeds", "per_seed")}
+    means["paired_speedup"] = pooled_pairs([m.paired_speedup for m in per_seed])
+    means["paired_at"] = {size: pooled_pairs([(m.paired_at or {}).get(size) for m in per_seed])
+                          for size in per_seed[0].paired_at or {}}
     return RowResult(**means, seeds=list(seeds),
                      per_seed=[replace(m, sample=None) for m in per_seed])
+
+
+def pooled_pairs(pairs: list) -> dict | None:
+    """One interleaved-pair timing (:func:`bench.measure.time_pairs`) per seed as one: its
+    interval over every seed's pairs pooled (not an average of intervals), the times the
+    seeds' means; None if a seed has none."""
+    from bench.measure import speedup_interval
+
+    if not pairs or any(p is None for p in pairs):
+        return None
+    ratios = [r for p in pairs for r in p["ratios"]]
+    return {**pairs[0], **speedup_interval(ratios), "ratios": ratios,
+            "ms_row": float(np.mean([p["ms_row"] for p in pairs])),
+            "ms_baseline": float(np.mean([p["ms_baseline"] for p in pairs]))}
 
 
 def spread(values: list) -> dict | None:

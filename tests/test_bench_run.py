@@ -113,7 +113,7 @@ def fake_training(monkeypatch):
     def measure_pair(row_baked, row_render, base_baked, base_render, test_set, **kw):
         calls.append(("pair", row_baked.name, base_baked.name))
         pair = {"ratio": 1.5, "lo": 1.2, "hi": 1.9, "n": 8, "stage": "frame", "size": "4x4",
-                "ms_row": 10.0, "ms_baseline": 15.0}
+                "ms_row": 10.0, "ms_baseline": 15.0, "ratios": [1.5] * 8}
         return {"paired_speedup": pair, "paired_at": {}, "same_image": None}
 
     cam = SimpleNamespace(width=4, height=4)

@@ -112,3 +112,25 @@ def test_equivalence_is_two_one_sided_tests(mean, std, n, expected):
 def test_equivalence_needs_a_positive_margin():
     with pytest.raises(ValueError, match="margin must be > 0"):
         seeds.equivalence(0.0, 0.1, 3, margin=0.0)
+
+
+def test_seeds_pool_their_timing_pairs():
+    """With several seeds the speed-up interval is over every seed's pairs pooled: the
+    geometric mean of all ratios, n their count (an average of the seeds' intervals would
+    be no interval of anything)."""
+    def pair(ratios, ms):
+        logs = np.log(ratios)
+        return {"ratio": float(np.exp(logs.mean())), "lo": 0.0, "hi": 0.0, "n": len(ratios),
+                "stage": "march", "size": "4x4", "ms_row": ms, "ms_baseline": 2 * ms,
+                "ratios": list(ratios)}
+
+    a = replace(_m(20.0, 10.0), paired_speedup=pair([1.0, 2.0], 4.0),
+                paired_at={"8x8": pair([1.0, 1.0], 8.0)})
+    b = replace(_m(21.0, 10.0), paired_speedup=pair([4.0, 8.0], 6.0),
+                paired_at={"8x8": pair([1.0, 1.0], 8.0)})
+    m = seeds.aggregate([a, b], [0, 1])
+    p = m.paired_speedup
+    assert p["n"] == 4 and p["ratio"] == pytest.approx(64 ** 0.25, rel=1e-12)
+    assert p["lo"] < p["ratio"] < p["hi"] and p["ms_row"] == 5.0 and p["ms_baseline"] == 10.0
+    assert m.paired_at["8x8"]["n"] == 4 and m.paired_at["8x8"]["ratio"] == pytest.approx(1.0)
+    assert seeds.aggregate([a, replace(b, paired_speedup=None)], [0, 1]).paired_speedup is None
