@@ -31,7 +31,8 @@ import numpy as np
 import torch
 
 from bench import cache
-from bench.limits import F8_BYTES, deferred_flops, flop_rate, gather_rate
+from bench.limits import F8_BYTES, flop_rate, gather_rate
+from bench.ngprt_bounds import deferred_flops
 from clrender.atomic import write_atomic
 from clrender.data import load_dataset
 from clrender.ngprt import engine as engines
