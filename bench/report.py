@@ -91,8 +91,8 @@ def markdown(table, results: list, meta: dict, claims: list[dict]) -> str:
         for col in table.paper_columns:
             cells += [_ours(table, col, m, n), _fmt(table, col, row.paper.get(col))]
         if ratios:
-            paired = getattr(m, "paired_speedup", None)
-            cells += [compare.speedup_cell(None if ox is None else paired or {"ratio": ox}),
+            cells += [compare.speedup_cell(None if ox is None else
+                                           m.paired_speedup or {"ratio": ox}),
                       "" if px is None else f"{px:.2f}x"]
         cells += [f"{m.time_at[w]['median']:.1f}" for w in table.timing_sizes]
         cells += _paired_cells(table, results, row, m)
