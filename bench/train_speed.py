@@ -8,9 +8,9 @@ each in turn (``--warmup`` untimed steps, then ``--steps`` timed ones, from step
 lattice adapting its ray count to the preset's target samples). Per stage
 (:mod:`clrender.ngprt.stages`: ray sampling, coarse corners and their de-duplication,
 auxiliary encoding + MLP, coarse trilinear, fine levels, fusion, compositing, shading,
-losses, each stage's backward, the optimiser; the occupancy update timed once per engine
-after the steps and amortised over ``occ_every`` steps): the median seconds over the
-timed steps, and a bound from the stage's counted gathers, streamed bytes and FLOPs at
+losses, each stage's backward, the optimiser; the occupancy updates timed per engine
+after the steps, one warm-up and one later update, amortised over the preset's run): the
+median seconds over the timed steps, and a bound from the stage's counted gathers, streamed bytes and FLOPs at
 this machine's rates measured in the same run (:mod:`bench.limits`'s random-gather and
 FLOP rates on the OpenCL device, the same CPU; the streaming rate of a torch copy).
 "Samples" are the samples entering the loss (the preset's target batch);
@@ -76,11 +76,20 @@ class _Trainer:
                                "forward": dict(clock.forward), "backward": dict(clock.backward),
                                "samples": out["n_samples"], "rays": len(out["rgb"])})
 
-    def occupancy_seconds(self, step: int) -> float:
-        t0 = time.perf_counter()
-        self.occ.update(self.model, step, self.tcfg.occ_warmup, self.tcfg.occ_fraction,
-                        self.tcfg.occ_decay, self.tcfg.occ_threshold)
-        return time.perf_counter() - t0
+    def occupancy_seconds(self) -> float:
+        """Seconds of the occupancy updates a step carries over the preset's whole run: one
+        warm-up update (every cell) and one after (the sampled cells) timed, weighted by
+        how many of each the run makes."""
+        tc = self.tcfg
+        steps = range(0, tc.iterations, tc.occ_every)
+        n_warm = sum(1 for s in steps if s < tc.occ_warmup)
+        times = []
+        for step in (0, tc.occ_warmup):
+            t0 = time.perf_counter()
+            self.occ.update(self.model, step, tc.occ_warmup, tc.occ_fraction, tc.occ_decay,
+                            tc.occ_threshold)
+            times.append(time.perf_counter() - t0)
+        return (n_warm * times[0] + (len(steps) - n_warm) * times[1]) / tc.iterations
 
 
 def _median(xs) -> float:
@@ -159,13 +168,14 @@ def _corner_count(model: NGPRT, t: _Trainer) -> tuple[float, float]:
     return float(len(u)), float(len(torch.unique(ids)))
 
 
-def summarise(t: _Trainer, occ_s: float, occ_every: int) -> dict:
+def summarise(t: _Trainer, occ_s: float) -> dict:
+    """``t``'s medians by stage; ``occ_s`` the occupancy seconds a step carries."""
     fw = {s: _median([st["forward"].get(s, 0.0) for st in t.steps]) for s in FORWARD}
     fw["optimiser"] = _median([st["forward"].get("optimiser", 0.0) for st in t.steps])
     bw = {s: _median([st["backward"].get(s, 0.0) for st in t.steps]) for s in BACKWARD}
-    step_s = _median([st["total"] for st in t.steps]) + occ_s / occ_every
+    step_s = _median([st["total"] for st in t.steps]) + occ_s
     samples = _median([st["samples"] for st in t.steps])
-    return {"forward_s": fw, "backward_s": bw, "occupancy_s": occ_s / occ_every,
+    return {"forward_s": fw, "backward_s": bw, "occupancy_s": occ_s,
             "step_s": step_s, "samples": samples,
             "rays": _median([st["rays"] for st in t.steps]),
             "samples_per_s": samples / step_s,
@@ -217,9 +227,9 @@ def run(preset: str, data, steps: int, warmup: int, out: Path, names, variant: s
     for i in range(warmup + steps):
         for t in trainers:
             t.step(i, timed=i >= warmup)
-    occ = {t.name: t.occupancy_seconds(warmup + steps) for t in trainers}
+    occ = {t.name: t.occupancy_seconds() for t in trainers}
     n_samples, n_corners = _corner_count(trainers[0].model, trainers[0])
-    res = {t.name: summarise(t, occ[t.name], tcfg.occ_every) for t in trainers}
+    res = {t.name: summarise(t, occ[t.name]) for t in trainers}
     rates = measure_rates(trainers[0].model, n_corners)
     c = counts(trainers[0].model, res[names[0]]["samples"],
                n_corners * res[names[0]]["samples"] / max(1.0, n_samples),

@@ -1,10 +1,16 @@
-"""The fast engine's fused grid lookup against torch_ops.grid_lookup (the specification),
-on random inputs: hashed, dense and on-vertices levels.
+"""The fast engine's fused stages against their torch_ops specifications, on random
+inputs.
 
-Tolerances: features within 1e-6 absolute (tables ~N(0, 1), 8 products summed in float32:
-the gather rounds its sums in its own order, embedding_bag in its); table gradients bit
-for bit (the same float32 products summed in bincount's order, sample then corner), for
-one thread and for two.
+Tolerances, stated before tuning:
+- grid lookup (hashed, dense and on-vertices levels): features within 1e-6 absolute
+  (tables ~N(0, 1), 8 products summed in float32: the gather rounds its sums in its own
+  order, embedding_bag in its); table gradients bit for bit (the same float32 products
+  summed in bincount's order, sample then corner), for one thread and for two.
+- the auxiliary NGP (encoding + MLP): outputs within 1e-5 of their largest magnitude,
+  every gradient within 1e-5 of its largest magnitude (fused multiply-adds and another
+  summation order than torch's matmuls; float32 sums of up to 3000 terms); bit for bit
+  the same for one thread and two (fixed chunks summed in order).
+- the coarse corners and their de-duplication: bit for bit.
 """
 import pytest
 import torch
@@ -71,6 +77,73 @@ def test_fast_corner_gather_equals_torch():
         res.append((out.detach(), torch.autograd.grad(out, v, grad_out)[0]))
     torch.testing.assert_close(res[1][0], res[0][0], rtol=0, atol=1e-5)
     torch.testing.assert_close(res[1][1], res[0][1], rtol=0, atol=1e-5)
+
+
+def _aux_case(seed=0, n=3000, hidden=64, out=12):
+    """Tables, corner coordinates and weights of an auxiliary NGP (a dense level, two
+    hashed ones, the last on the corners' vertices), weights ~ a trained model's scale."""
+    g = torch.Generator().manual_seed(seed)
+    res, dense, on_vertices = [8, 16, 32], [True, False, False], 1
+    tables = torch.randn(3, 1 << 12, 4, generator=g)
+    u = torch.randint(0, 33, (n, 3), generator=g).float() / 32
+    w0 = torch.randn(12, hidden, generator=g) * 0.3
+    w1 = torch.randn(hidden, out, generator=g) * 0.2
+    b0, b1 = torch.randn(hidden, generator=g) * 0.1, torch.randn(out, generator=g) * 0.1
+    return tables, u, res, dense, on_vertices, w0, b0, w1, b1
+
+
+def _aux_run(fn, case, threads):
+    tables, u, res, dense, on_vertices, *weights = case
+    params = [t.clone().requires_grad_() for t in [tables, *weights]]
+    prev = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        out = fn(params[0], u, res, dense, on_vertices, *params[1:])
+        g = torch.randn(out.shape, generator=torch.Generator().manual_seed(2))
+        return out.detach(), torch.autograd.grad(out, params, g)
+    finally:
+        torch.set_num_threads(prev)
+
+
+@pytest.mark.parametrize("hidden,out", [(64, 12), (32, 16), (64, 9)])
+def test_fused_aux_values_equal_torch(hidden, out):
+    """Values and the gradients of the tables, w0, b0, w1 and b1; sizes below the padded
+    ones (32, 9 outputs) are exact padding."""
+    case = _aux_case(hidden=hidden, out=out)
+    ref_out, ref_grads = _aux_run(ops.aux_values, case, 2)
+    got_out, got_grads = _aux_run(fused.aux_values, case, 2)
+    torch.testing.assert_close(got_out, ref_out, rtol=0,
+                               atol=1e-5 * float(ref_out.abs().max()))
+    for name, a, b in zip(("tables", "w0", "b0", "w1", "b1"), got_grads, ref_grads):
+        torch.testing.assert_close(a, b, rtol=0, atol=1e-5 * float(b.abs().max()), msg=name)
+
+
+def test_fused_aux_values_same_for_any_thread_count():
+    case = _aux_case(n=9000)                    # several of the backward's chunks
+    one, two = _aux_run(fused.aux_values, case, 1), _aux_run(fused.aux_values, case, 2)
+    assert torch.equal(one[0], two[0])
+    assert all(torch.equal(a, b) for a, b in zip(one[1], two[1]))
+
+
+def test_fused_aux_values_refuse_sizes_above_the_padding():
+    tables, u, res, dense, on_vertices, w0, b0, w1, b1 = _aux_case(hidden=64, out=12)
+    big = torch.zeros(64, 17)
+    with pytest.raises(ValueError, match="above the fused sizes"):
+        fused.aux_values(tables, u, res, dense, on_vertices, w0, b0, big, torch.zeros(17))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_fused_coarse_corners_equal_torch(threads):
+    g = torch.Generator().manual_seed(0)
+    u = torch.rand(5000, 3, generator=g) * 1.2 - 0.1          # a few outside: clamped cells
+    prev = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        got, ref = fused.coarse_corners(u, 32), ops.coarse_corners(u, 32)
+    finally:
+        torch.set_num_threads(prev)
+    for a, b in zip(got, ref):
+        assert a.dtype == b.dtype and torch.equal(a, b)
 
 
 def test_fused_lookup_refuses_bad_input():

@@ -1,12 +1,11 @@
-"""Training engines: who computes the multi-level grid lookups of a training step.
+"""Training engines: who computes the grid and coarse stages of a training step.
 
-* ``torch``: :func:`clrender.ngprt.torch_ops.grid_lookup`, torch autograd (the
+* ``torch``: the :mod:`clrender.ngprt.torch_ops` functions under torch autograd (the
   specification; CPU and CUDA).
-* ``fast``: :func:`clrender.ngprt.fused.grid_lookup`, a C++ extension (built with the
-  machine's compiler at first use) with the same values and gradients, and the coarse
-  corners' trilinear sum by :func:`clrender.ngprt.torch_ops.weighted_gather`
-  (``embedding_bag`` forward, ``bincount`` backward: 2x the indexing's speed, measured)
-  (CPU only).
+* ``fast``: their fused twins in :mod:`clrender.ngprt.fused`, a C++ extension (built with
+  the machine's compiler at first use): the fine levels' lookup, the auxiliary NGP
+  (encoding + MLP) at the batch's L_C corners, the corners' de-duplication and the coarse
+  trilinear sum (CPU only).
 
 Both engines train the same model with the same math; ``tests/test_fused.py`` compares
 their values and gradients.
@@ -27,15 +26,17 @@ ENGINES = ("torch", "fast")
 
 @dataclass(frozen=True)
 class Engine:
-    """Named implementations of :func:`clrender.ngprt.torch_ops.grid_lookup` and
-    :func:`clrender.ngprt.torch_ops.corner_gather` (same signatures)."""
+    """Named implementations of the :mod:`clrender.ngprt.torch_ops` functions of the
+    same names (same signatures and results)."""
 
     name: str
     grid_lookup: Callable
     corner_gather: Callable
+    aux_values: Callable
+    coarse_corners: Callable
 
 
-TORCH = Engine("torch", ops.grid_lookup, ops.corner_gather)
+TORCH = Engine("torch", ops.grid_lookup, ops.corner_gather, ops.aux_values, ops.coarse_corners)
 
 
 def get(name: str, device) -> Engine:
@@ -57,4 +58,5 @@ def get(name: str, device) -> Engine:
         raise RuntimeError(f"the fast engine's C++ extension ({fused.SOURCE.name}) did not "
                            f"build (it needs g++ and ninja; --engine torch trains without "
                            f"them): {e}") from e
-    return Engine("fast", fused.grid_lookup, ops.weighted_gather)
+    return Engine("fast", fused.grid_lookup, fused.corner_gather, fused.aux_values,
+                  fused.coarse_corners)

@@ -1,6 +1,9 @@
-"""The fast engine's fused grid lookup: a C++ extension (``fused_grid.cpp``) behind an
-autograd Function with the signature and results of
-:func:`clrender.ngprt.torch_ops.grid_lookup` (CPU, float32).
+"""The fast engine's fused stages: a C++ extension (``fused_grid.cpp``) behind autograd
+Functions with the signatures and results of their :mod:`clrender.ngprt.torch_ops`
+specifications (CPU, float32): :func:`grid_lookup` (the fine levels),
+:func:`aux_values` (the auxiliary NGP's encoding and MLP in one pass, its hidden layer
+recomputed in the backward from the stored features, never stored), :func:`coarse_corners` (bit for bit) and
+:func:`corner_gather` (the coarse trilinear sum).
 
 The extension is compiled with the machine's C++ compiler at first use
 (``torch.utils.cpp_extension.load``, cached by torch under ``$TORCH_EXTENSIONS_DIR``;
@@ -8,7 +11,10 @@ The extension is compiled with the machine's C++ compiler at first use
 (``torch.set_num_threads``). Values: the reference's float32 operations in its order
 (the gather's sums may round differently from ``embedding_bag``'s, bounded in
 ``tests/test_fused.py``); table gradients: bit-identical to the reference's bincount
-(float32 sums in the same order), deterministic for any thread count.
+(float32 sums in the same order), deterministic for any thread count. The auxiliary
+MLP rounds differently from torch's matmuls (fused multiply-adds, its own summation
+order; bounded in ``tests/test_fused.py``), deterministic for any thread count (its
+weight gradient summed per fixed chunk of corners, the chunks in order).
 """
 from __future__ import annotations
 
@@ -67,8 +73,78 @@ def grid_lookup(tables: torch.Tensor, u: torch.Tensor, resolutions, dense=None,
     if not 0 <= on_vertices <= n_lev or len(resolutions) != n_lev:
         raise ValueError(f"grid_lookup: need {n_lev} resolutions and on_vertices in "
                          f"[0, {n_lev}], got {list(resolutions)} and {on_vertices}")
-    if tables.device.type != "cpu" or tables.dtype != torch.float32 or u.dtype != torch.float32:
-        raise ValueError(f"fused grid_lookup: float32 CPU tensors expected, got tables "
-                         f"{tables.dtype} on {tables.device}, u {u.dtype}")
+    _cpu_float32("grid_lookup", tables=tables, u=u)
     return _GridLookup.apply(tables.contiguous(), u.contiguous(),
                              [int(r) for r in resolutions], dense, int(on_vertices))
+
+
+def _cpu_float32(name: str, **tensors) -> None:
+    bad = {k: f"{t.dtype} on {t.device}" for k, t in tensors.items()
+           if t.device.type != "cpu" or t.dtype != torch.float32}
+    if bad:
+        raise ValueError(f"fused {name}: float32 CPU tensors expected, got {bad}")
+
+
+class _AuxValues(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, tables, u, resolutions, dense, on_vertices, w0, b0, w1, b1):
+        out, x = _extension()[0].aux_forward(tables, u, resolutions, dense, on_vertices,
+                                             w0, b0, w1, b1, any(ctx.needs_input_grad))
+        ctx.save_for_backward(x, tables, u, w0, b0, w1, b1)    # x: the (N, I) features
+        ctx.args = (resolutions, dense, on_vertices)
+        return out
+
+    @staticmethod
+    def backward(ctx, g):
+        x, tables, u, w0, b0, w1, b1 = ctx.saved_tensors
+        res, dense, on_vertices = ctx.args
+        gt, gw0, gb0, gw1, gb1 = _extension()[0].aux_backward(
+            g.contiguous(), x, tables, u, res, dense, on_vertices, w0, b0, w1, b1)
+        return gt, None, None, None, None, gw0, gb0, gw1, gb1
+
+
+def aux_values(tables, u, resolutions, dense, on_vertices, w0, b0, w1, b1) -> torch.Tensor:
+    """(N, O) :func:`clrender.ngprt.torch_ops.aux_values`, fused; differentiable in the
+    tables and the MLP's weights."""
+    _cpu_float32("aux_values", tables=tables, u=u, w0=w0, b0=b0, w1=w1, b1=b1)
+    dense = [bool(d) for d in dense]
+    if dense != sorted(dense, reverse=True):
+        raise ValueError(f"aux_values: dense levels must come first, got {dense}")
+    sizes, most = (w0.shape[0], w0.shape[1], w1.shape[1]), _extension()[0].AUX_MAX
+    if any(n > m for n, m in zip(sizes, most)):
+        raise ValueError(f"fused aux_values: the MLP {'->'.join(map(str, sizes))} is above "
+                         f"the fused sizes {'->'.join(map(str, most))} (train it with "
+                         f"--engine torch)")
+    return _AuxValues.apply(tables.contiguous(), u.contiguous(), [int(r) for r in resolutions],
+                            dense, int(on_vertices), w0.contiguous(), b0.contiguous(),
+                            w1.contiguous(), b1.contiguous())
+
+
+def coarse_corners(u: torch.Tensor, res: int):
+    """:func:`clrender.ngprt.torch_ops.coarse_corners`, fused (the same results, bit for
+    bit: corners, idx, w)."""
+    _cpu_float32("coarse_corners", u=u)
+    corners, idx, w = _extension()[0].coarse_corners(u.contiguous(), int(res))
+    return corners, idx, w
+
+
+class _CornerGather(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, values, idx, w):
+        ctx.save_for_backward(idx, w)
+        ctx.rows = values.shape[0]
+        return _extension()[0].corner_forward(values, idx, w)
+
+    @staticmethod
+    def backward(ctx, g):
+        idx, w = ctx.saved_tensors
+        return _extension()[0].corner_backward(g.contiguous(), idx, w, ctx.rows), None, None
+
+
+def corner_gather(values: torch.Tensor, idx: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+    """(N, C) :func:`clrender.ngprt.torch_ops.corner_gather`, fused; differentiable in
+    ``values`` (gradient rows summed in sample then corner order, any thread count)."""
+    _cpu_float32("corner_gather", values=values, w=w)
+    if idx.dtype != torch.int64:
+        raise ValueError(f"fused corner_gather: int64 idx expected, got {idx.dtype}")
+    return _CornerGather.apply(values.contiguous(), idx.contiguous(), w.contiguous())

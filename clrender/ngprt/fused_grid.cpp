@@ -4,11 +4,19 @@
 // The specification is torch_ops.grid_lookup: the same float32 operations in the same
 // order; the gradient accumulates in float32 in the order of its bincount (sample, then
 // corner), so it is the reference's bit for bit.
+// Also: the auxiliary NGP fused whole (encoding, then its one-hidden-layer MLP per corner,
+// nothing of the hidden layer kept; torch_ops.aux_values), the coarse grid's corners with
+// their de-duplication (torch_ops.coarse_corners, bit for bit) and their trilinear sum
+// (torch_ops.corner_gather). The MLP uses fused multiply-adds and its own summation
+// order: a change of rounding, bounded in tests/test_fused.py.
 #include <torch/extension.h>
 #include <ATen/Parallel.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <memory>
 #include <vector>
 
 namespace {
@@ -31,41 +39,110 @@ std::vector<Level> levels(const std::vector<int64_t>& res, const std::vector<boo
     return out;
 }
 
-// Row (within the level's table) of corner (x, y, z); as torch_ops._level_indices.
-inline int64_t row(const Level& lv, int64_t x, int64_t y, int64_t z, int64_t mask) {
-    if (lv.dense) {
-        x = std::min(std::max(x, (int64_t)0), lv.r1 - 1);
-        y = std::min(std::max(y, (int64_t)0), lv.r1 - 1);
-        z = std::min(std::max(z, (int64_t)0), lv.r1 - 1);
-        return x * (lv.r1 * lv.r1) + y * lv.r1 + z;
-    }
-    return (x ^ (y * PRIME_Y) ^ (z * PRIME_Z)) & mask;
-}
-
 // The corners (rows) and trilinear weights of sample u at level lv: 8, or 1 on vertices.
+// Rows as torch_ops._level_indices (hash: x ^ y * PRIME_Y ^ z * PRIME_Z masked; dense:
+// clamped, x slowest), built from each axis' two terms; weights wx * wy * wz in float32.
 inline int corners(const Level& lv, const float* u, int64_t mask, int64_t* rows, float* w) {
-    int64_t b[3];
-    float w1[3];
+    int64_t t[3][2];                   // each axis' term of the row, for corner offsets 0, 1
+    float wa[3][2];
+    const int64_t scale[3] = {lv.dense ? lv.r1 * lv.r1 : 1, lv.dense ? lv.r1 : PRIME_Y,
+                              lv.dense ? 1 : PRIME_Z};
     for (int a = 0; a < 3; ++a) {
         const float p = u[a] * lv.res;
         const float f = std::floor(p);
-        b[a] = (int64_t)f;
-        w1[a] = p - f;
+        const int64_t b = (int64_t)f;
+        wa[a][1] = p - f;
+        wa[a][0] = 1.0f - wa[a][1];
+        for (int c = 0; c < 2; ++c) {
+            const int64_t x = lv.dense ? std::min(std::max(b + c, (int64_t)0), lv.r1 - 1) : b + c;
+            t[a][c] = x * scale[a];
+        }
     }
     if (lv.vertex) {
-        rows[0] = row(lv, b[0], b[1], b[2], mask);
+        rows[0] = lv.dense ? t[0][0] + t[1][0] + t[2][0] : (t[0][0] ^ t[1][0] ^ t[2][0]) & mask;
         w[0] = 1.0f;
         return 1;
     }
     for (int c = 0; c < 8; ++c) {
         const int cx = (c >> 2) & 1, cy = (c >> 1) & 1, cz = c & 1;
-        rows[c] = row(lv, b[0] + cx, b[1] + cy, b[2] + cz, mask);
-        const float wx = cx ? w1[0] : 1.0f - w1[0];
-        const float wy = cy ? w1[1] : 1.0f - w1[1];
-        const float wz = cz ? w1[2] : 1.0f - w1[2];
-        w[c] = wx * wy * wz;
+        rows[c] = lv.dense ? t[0][cx] + t[1][cy] + t[2][cz]
+                           : (t[0][cx] ^ t[1][cy] ^ t[2][cz]) & mask;
+        w[c] = wa[0][cx] * wa[1][cy] * wa[2][cz];
     }
     return 8;
+}
+
+// The (n_levels * F) features of the sample at u into dst; FF > 0: F known at compile
+// time (4 and 8, the presets' feature counts).
+template <int FF>
+inline void lookup_f(const std::vector<Level>& lv, const float* tab, int64_t T, int64_t Fr,
+                     const float* u, float* dst) {
+    const int64_t F = FF > 0 ? FF : Fr;
+    int64_t rows[8];
+    float w[8];
+    for (size_t l = 0; l < lv.size(); ++l, dst += F) {
+        const int k = corners(lv[l], u, T - 1, rows, w);
+        for (int64_t f = 0; f < F; ++f) dst[f] = 0.0f;
+        for (int j = 0; j < k; ++j) {
+            const float* src = tab + ((int64_t)l * T + rows[j]) * F;
+            for (int64_t f = 0; f < F; ++f) dst[f] += w[j] * src[f];
+        }
+    }
+}
+
+// Prefetch the rows the sample at u will read (the samples a few ahead of the gather:
+// the tables are larger than the caches and their rows random).
+inline void prefetch(const std::vector<Level>& lv, const float* tab, int64_t T, int64_t F,
+                     const float* u) {
+    int64_t rows[8];
+    float w[8];
+    for (size_t l = 0; l < lv.size(); ++l) {
+        const int k = corners(lv[l], u, T - 1, rows, w);
+        for (int j = 0; j < k; ++j) __builtin_prefetch(tab + ((int64_t)l * T + rows[j]) * F);
+    }
+}
+
+// Samples between a row's prefetch and its read.
+constexpr int64_t AHEAD = 8;
+
+inline void lookup(const std::vector<Level>& lv, const float* tab, int64_t T, int64_t F,
+                   const float* u, float* dst) {
+    if (F == 4) lookup_f<4>(lv, tab, T, F, u, dst);
+    else if (F == 8) lookup_f<8>(lv, tab, T, F, u, dst);
+    else lookup_f<0>(lv, tab, T, F, u, dst);
+}
+
+// Table gradient of the levels [begin, end) from g (N, n_levels, F), rows summed in
+// float32 in sample then corner order (as bincount), into acc (n_levels, T, F); FF as in
+// lookup_f.
+template <int FF>
+void scatter_levels_f(const std::vector<Level>& lv, const float* gp, const float* up, int64_t N,
+                      int64_t T, int64_t Fr, int64_t begin, int64_t end, float* a) {
+    const int64_t F = FF > 0 ? FF : Fr;
+    const int64_t n_lev = (int64_t)lv.size();
+    int64_t rows[8];
+    float w[8];
+    for (int64_t l = begin; l < end; ++l)
+        for (int64_t n = 0; n < N; ++n) {
+            if (n + AHEAD < N) {
+                corners(lv[l], up + 3 * (n + AHEAD), T - 1, rows, w);
+                for (int j = 0; j < (lv[l].vertex ? 1 : 8); ++j)
+                    __builtin_prefetch(a + (l * T + rows[j]) * F, 1);
+            }
+            const int k = corners(lv[l], up + 3 * n, T - 1, rows, w);
+            const float* src = gp + (n * n_lev + l) * F;
+            for (int j = 0; j < k; ++j) {
+                float* dst = a + (l * T + rows[j]) * F;
+                for (int64_t f = 0; f < F; ++f) dst[f] += w[j] * src[f];
+            }
+        }
+}
+
+void scatter_levels(const std::vector<Level>& lv, const float* gp, const float* up, int64_t N,
+                    int64_t T, int64_t F, int64_t begin, int64_t end, float* a) {
+    if (F == 4) scatter_levels_f<4>(lv, gp, up, N, T, F, begin, end, a);
+    else if (F == 8) scatter_levels_f<8>(lv, gp, up, N, T, F, begin, end, a);
+    else scatter_levels_f<0>(lv, gp, up, N, T, F, begin, end, a);
 }
 
 }  // namespace
@@ -81,18 +158,10 @@ torch::Tensor grid_forward(torch::Tensor tables, torch::Tensor u, std::vector<in
     const float* up = u.data_ptr<float>();
     float* o = out.data_ptr<float>();
     at::parallel_for(0, N, 256, [&](int64_t begin, int64_t end) {
-        int64_t rows[8];
-        float w[8];
-        for (int64_t n = begin; n < end; ++n)
-            for (int64_t l = 0; l < n_lev; ++l) {
-                const int k = corners(lv[l], up + 3 * n, T - 1, rows, w);
-                float* dst = o + (n * n_lev + l) * F;
-                for (int64_t f = 0; f < F; ++f) dst[f] = 0.0f;
-                for (int j = 0; j < k; ++j) {
-                    const float* src = tab + (l * T + rows[j]) * F;
-                    for (int64_t f = 0; f < F; ++f) dst[f] += w[j] * src[f];
-                }
-            }
+        for (int64_t n = begin; n < end; ++n) {
+            if (n + AHEAD < end) prefetch(lv, tab, T, F, up + 3 * (n + AHEAD));
+            lookup(lv, tab, T, F, up + 3 * n, o + n * n_lev * F);
+        }
     });
     return out;
 }
@@ -109,22 +178,310 @@ torch::Tensor grid_backward(torch::Tensor g, torch::Tensor u, int64_t T,
     const float* up = u.data_ptr<float>();
     float* a = acc.data_ptr<float>();
     at::parallel_for(0, n_lev, 1, [&](int64_t begin, int64_t end) {
-        int64_t rows[8];
-        float w[8];
-        for (int64_t l = begin; l < end; ++l)
-            for (int64_t n = 0; n < N; ++n) {
-                const int k = corners(lv[l], up + 3 * n, T - 1, rows, w);
-                const float* src = gp + (n * n_lev + l) * F;
-                for (int j = 0; j < k; ++j) {
-                    float* dst = a + (l * T + rows[j]) * F;
-                    for (int64_t f = 0; f < F; ++f) dst[f] += w[j] * src[f];
-                }
-            }
+        scatter_levels(lv, gp, up, N, T, F, begin, end, a);
     });
     return acc;
+}
+
+
+// -- the auxiliary NGP: encoding + MLP (torch_ops.aux_values) ----------------------------
+// The MLP's multiply-adds may be fused (its rounding is not the reference's anyway): from
+// here to the end of the file; the grid code above rounds each product.
+#pragma GCC optimize("fp-contract=fast")
+
+namespace {
+
+// Corners per task of the MLP's backward: each chunk sums its weight gradient alone, and
+// the chunks are added in order, so the result does not depend on the thread count.
+constexpr int64_t AUX_CHUNK = 2048;
+// The MLP's sizes padded with zero weights (exact: a padded unit's pre-activation is 0,
+// so relu keeps it 0 and masks its gradient), in 16-float vectors (GCC vector types: one
+// AVX-512 register, two AVX2 ones): the hidden layer is 4 vectors, the output 1.
+constexpr int64_t PI = 32, PH = 64, PO = 16, V = 16;
+typedef float v16 __attribute__((vector_size(64)));
+
+struct Mlp {
+    v16 w0[PI][PH / V], b0[PH / V], w1[PH], b1;       // x @ w + b: w0[i] the row of input i
+    v16 w1t[PO][PH / V], w0t[PH][PI / V];             // transposed: w1t[k] the column k
+    int64_t I, H, O;
+
+    Mlp(const torch::Tensor& W0, const torch::Tensor& B0, const torch::Tensor& W1,
+        const torch::Tensor& B1)
+        : w0(), b0(), w1(), b1(), w1t(), w0t(), I(W0.size(0)), H(W0.size(1)), O(W1.size(1)) {
+        TORCH_CHECK(I <= PI && H <= PH && O <= PO, "aux MLP ", I, "->", H, "->", O,
+                    " is above the fused sizes ", PI, "->", PH, "->", PO);
+        const float *a0 = W0.data_ptr<float>(), *c0 = B0.data_ptr<float>();
+        const float *a1 = W1.data_ptr<float>(), *c1 = B1.data_ptr<float>();
+        for (int64_t j = 0; j < H; ++j) {
+            b0[j / V][j % V] = c0[j];
+            for (int64_t i = 0; i < I; ++i)
+                w0t[j][i / V][i % V] = w0[i][j / V][j % V] = a0[i * H + j];
+            for (int64_t k = 0; k < O; ++k) w1t[k][j / V][j % V] = w1[j][k] = a1[j * O + k];
+        }
+        for (int64_t k = 0; k < O; ++k) b1[k] = c1[k];
+    }
+
+    // h = relu(x @ w0 + b0) for x (I)
+    void hidden(const float* x, v16* h) const {
+        for (int q = 0; q < PH / V; ++q) h[q] = b0[q];
+        for (int64_t i = 0; i < I; ++i)
+            for (int q = 0; q < PH / V; ++q) h[q] += x[i] * w0[i][q];
+        for (int q = 0; q < PH / V; ++q) h[q] = h[q] > 0.0f ? h[q] : 0.0f;
+    }
+
+    // h @ w1 + b1
+    v16 output(const v16* h) const {
+        float hs[PH];                          // scalars to broadcast
+        std::memcpy(hs, h, sizeof(hs));
+        v16 o = b1;
+        for (int64_t j = 0; j < PH; ++j) o += hs[j] * w1[j];
+        return o;
+    }
+};
+
+}  // namespace
+
+// [(M, O) auxiliary NGP outputs at grid coordinates u (M, 3), and with keep_x the (M, I)
+// features x]: the grid lookup of tables (n_levels, T, F) into x (n_levels * F = I), then
+// relu(x @ w0 + b0) @ w1 + b1.
+std::vector<torch::Tensor> aux_forward(torch::Tensor tables, torch::Tensor u,
+                                       std::vector<int64_t> res, std::vector<bool> dense,
+                                       int64_t on_vertices, torch::Tensor w0, torch::Tensor b0,
+                                       torch::Tensor w1, torch::Tensor b1, bool keep_x) {
+    const int64_t T = tables.size(1), F = tables.size(2), M = u.size(0);
+    const auto lv = levels(res, dense, on_vertices);
+    const auto mlp_ptr = std::make_unique<Mlp>(w0, b0, w1, b1);
+    const Mlp& mlp = *mlp_ptr;
+    TORCH_CHECK((int64_t)lv.size() * F == mlp.I, "aux MLP input ", mlp.I, " != levels x features");
+    auto out = torch::empty({M, mlp.O}, tables.options());
+    const float* tab = tables.data_ptr<float>();
+    const float* up = u.data_ptr<float>();
+    float* o = out.data_ptr<float>();
+    const int64_t I = mlp.I, O = mlp.O;
+    auto xs = torch::empty({keep_x ? M : 0, I}, tables.options());
+    float* xp = xs.data_ptr<float>();
+    at::parallel_for(0, M, 256, [&](int64_t begin, int64_t end) {
+        float x[PI];
+        v16 h[PH / V];
+        for (int64_t n = begin; n < end; ++n) {
+            if (n + AHEAD < end) prefetch(lv, tab, T, F, up + 3 * (n + AHEAD));
+            lookup(lv, tab, T, F, up + 3 * n, x);
+            mlp.hidden(x, h);
+            const v16 y = mlp.output(h);
+            for (int64_t k = 0; k < O; ++k) o[n * O + k] = y[k];
+            if (keep_x)
+                for (int64_t i = 0; i < I; ++i) xp[n * I + i] = x[i];
+        }
+    });
+    return {out, xs};
+}
+
+// Gradients of aux_forward from g (M, O), given its features xs (M, I): [tables (n_levels,
+// T, F), w0, b0, w1, b1]. The hidden layer is recomputed; the table gradient is
+// grid_backward's of the input gradient.
+std::vector<torch::Tensor> aux_backward(torch::Tensor g, torch::Tensor xs, torch::Tensor tables,
+                                        torch::Tensor u,
+                                        std::vector<int64_t> res, std::vector<bool> dense,
+                                        int64_t on_vertices, torch::Tensor w0, torch::Tensor b0,
+                                        torch::Tensor w1, torch::Tensor b1) {
+    const int64_t n_lev = tables.size(0), T = tables.size(1), F = tables.size(2);
+    const int64_t M = u.size(0);
+    const auto lv = levels(res, dense, on_vertices);
+    const auto mlp_ptr = std::make_unique<Mlp>(w0, b0, w1, b1);
+    const Mlp& mlp = *mlp_ptr;
+    const int64_t I = mlp.I, H = mlp.H, O = mlp.O;
+    TORCH_CHECK(n_lev * F == I, "aux MLP input ", I, " != levels x features");
+    const int64_t n_chunks = (M + AUX_CHUNK - 1) / AUX_CHUNK;
+    auto gx = torch::empty({M, n_lev, F}, g.options());
+    struct Part {                      // one chunk's weight gradient, padded
+        v16 w0[PI][PH / V], b0[PH / V], w1[PH], b1;
+    };
+    std::vector<Part> part(n_chunks);
+    const float* xp = xs.data_ptr<float>();
+    const float* up = u.data_ptr<float>();
+    const float* gp = g.data_ptr<float>();
+    float* gxp = gx.data_ptr<float>();
+    at::parallel_for(0, n_chunks, 1, [&](int64_t c0, int64_t c1) {
+        float x[PI];
+        v16 h[PH / V], gh[PH / V], dx[PI / V];
+        for (int64_t c = c0; c < c1; ++c) {
+            Part& d = part[c];
+            std::memset(&d, 0, sizeof(Part));
+            for (int64_t n = c * AUX_CHUNK; n < std::min(M, (c + 1) * AUX_CHUNK); ++n) {
+                for (int64_t i = 0; i < I; ++i) x[i] = xp[n * I + i];
+                mlp.hidden(x, h);
+                v16 go = {};
+                for (int64_t k = 0; k < O; ++k) go[k] = gp[n * O + k];
+                d.b1 += go;
+                float hs[PH], ghs[PH];             // scalars to broadcast
+                std::memcpy(hs, h, sizeof(hs));
+                for (int64_t j = 0; j < PH; ++j)   // h 0 where relu cut: a zero row, as torch's
+                    d.w1[j] += hs[j] * go;
+                for (int q = 0; q < PH / V; ++q) gh[q] = v16{};
+                for (int64_t k = 0; k < O; ++k)
+                    for (int q = 0; q < PH / V; ++q) gh[q] += go[k] * mlp.w1t[k][q];
+                for (int q = 0; q < PH / V; ++q) {
+                    gh[q] = h[q] > 0.0f ? gh[q] : 0.0f;
+                    d.b0[q] += gh[q];
+                }
+                for (int64_t i = 0; i < I; ++i)
+                    for (int q = 0; q < PH / V; ++q) d.w0[i][q] += x[i] * gh[q];
+                std::memcpy(ghs, gh, sizeof(ghs));
+                for (int q = 0; q < PI / V; ++q) dx[q] = v16{};
+                for (int64_t j = 0; j < PH; ++j)
+                    for (int q = 0; q < PI / V; ++q) dx[q] += ghs[j] * mlp.w0t[j][q];
+                for (int64_t i = 0; i < I; ++i) gxp[n * I + i] = dx[i / V][i % V];
+            }
+        }
+    });
+    Part sum = {};                     // the chunks in order
+    for (const Part& d : part) {
+        for (int64_t i = 0; i < PI; ++i)
+            for (int q = 0; q < PH / V; ++q) sum.w0[i][q] += d.w0[i][q];
+        for (int q = 0; q < PH / V; ++q) sum.b0[q] += d.b0[q];
+        for (int64_t j = 0; j < PH; ++j) sum.w1[j] += d.w1[j];
+        sum.b1 += d.b1;
+    }
+    auto gw0 = torch::empty({I, H}, g.options()), gb0 = torch::empty({H}, g.options());
+    auto gw1 = torch::empty({H, O}, g.options()), gb1 = torch::empty({O}, g.options());
+    for (int64_t j = 0; j < H; ++j) {
+        gb0.data_ptr<float>()[j] = sum.b0[j / V][j % V];
+        for (int64_t i = 0; i < I; ++i) gw0.data_ptr<float>()[i * H + j] = sum.w0[i][j / V][j % V];
+        for (int64_t k = 0; k < O; ++k) gw1.data_ptr<float>()[j * O + k] = sum.w1[j][k];
+    }
+    for (int64_t k = 0; k < O; ++k) gb1.data_ptr<float>()[k] = sum.b1[k];
+    auto acc = torch::zeros({n_lev, T, F}, g.options());
+    float* a = acc.data_ptr<float>();
+    at::parallel_for(0, n_lev, 1, [&](int64_t begin, int64_t end) {
+        scatter_levels(lv, gxp, up, M, T, F, begin, end, a);
+    });
+    return {acc, gw0, gb0, gw1, gb1};
+}
+
+// -- the coarse grid's corners (torch_ops.coarse_corners) --------------------------------
+
+// The L_C cell of each sample u (N, 3) at resolution R: [corners (M, 3) int64, the batch's
+// unique corners in increasing flat id (x slowest), as torch.unique; idx (N, 8) int64 into
+// them; w (N, 8) float32 trilinear weights (x slowest)], torch_ops' float32 operations.
+std::vector<torch::Tensor> coarse_corners(torch::Tensor u, int64_t R) {
+    const int64_t N = u.size(0), R1 = R + 1, n_ids = R1 * R1 * R1;
+    auto idx = torch::empty({N, 8}, u.options().dtype(torch::kInt64));
+    auto w = torch::empty({N, 8}, u.options());
+    const float* up = u.data_ptr<float>();
+    int64_t* ip = idx.data_ptr<int64_t>();
+    float* wp = w.data_ptr<float>();
+    const float Rf = (float)R;
+    at::parallel_for(0, N, 1024, [&](int64_t begin, int64_t end) {
+        for (int64_t n = begin; n < end; ++n) {
+            int64_t b[3];
+            float w1[3];
+            for (int a = 0; a < 3; ++a) {
+                const float p = up[3 * n + a] * Rf;
+                const float f = std::min(std::max(std::floor(p), 0.0f), (float)(R - 1));
+                b[a] = (int64_t)f;
+                w1[a] = p - f;
+            }
+            for (int c = 0; c < 8; ++c) {
+                const int cx = (c >> 2) & 1, cy = (c >> 1) & 1, cz = c & 1;
+                ip[8 * n + c] = ((b[0] + cx) * R1 + (b[1] + cy)) * R1 + (b[2] + cz);
+                const float wx = cx ? w1[0] : 1.0f - w1[0];
+                const float wy = cy ? w1[1] : 1.0f - w1[1];
+                const float wz = cz ? w1[2] : 1.0f - w1[2];
+                wp[8 * n + c] = wx * wy * wz;
+            }
+        }
+    });
+    // De-duplication by a dense mark over the (R+1)^3 corner ids (sorted by construction):
+    // the marks counted per block of ids, each block then numbering its own.
+    std::vector<uint8_t> mark(n_ids, 0);
+    for (int64_t q = 0; q < 8 * N; ++q) mark[ip[q]] = 1;
+    constexpr int64_t BLOCK = 1 << 16;
+    const int64_t n_blocks = (n_ids + BLOCK - 1) / BLOCK;
+    std::vector<int64_t> first(n_blocks + 1, 0);    // the first unique index of each block
+    at::parallel_for(0, n_blocks, 1, [&](int64_t b0, int64_t b1) {
+        for (int64_t b = b0; b < b1; ++b) {
+            int64_t k = 0;
+            for (int64_t id = b * BLOCK; id < std::min(n_ids, (b + 1) * BLOCK); ++id) k += mark[id];
+            first[b + 1] = k;
+        }
+    });
+    for (int64_t b = 0; b < n_blocks; ++b) first[b + 1] += first[b];
+    const int64_t M = first[n_blocks];
+    std::unique_ptr<int64_t[]> slot(new int64_t[n_ids]);   // read only where marked
+    auto corners = torch::empty({M, 3}, idx.options());
+    int64_t* cp = corners.data_ptr<int64_t>();
+    at::parallel_for(0, n_blocks, 1, [&](int64_t b0, int64_t b1) {
+        for (int64_t b = b0; b < b1; ++b) {
+            int64_t k = first[b];
+            for (int64_t id = b * BLOCK; id < std::min(n_ids, (b + 1) * BLOCK); ++id) {
+                if (!mark[id]) continue;
+                slot[id] = k;
+                cp[3 * k] = id / (R1 * R1);
+                cp[3 * k + 1] = (id / R1) % R1;
+                cp[3 * k + 2] = id % R1;
+                ++k;
+            }
+        }
+    });
+    at::parallel_for(0, 8 * N, 8192, [&](int64_t begin, int64_t end) {
+        for (int64_t q = begin; q < end; ++q) ip[q] = slot[ip[q]];
+    });
+    return {corners, idx, w};
+}
+
+// (N, C) sum_j w[n, j] * values[idx[n, j]] for values (M, C), idx and w (N, J).
+torch::Tensor corner_forward(torch::Tensor values, torch::Tensor idx, torch::Tensor w) {
+    const int64_t N = idx.size(0), J = idx.size(1), C = values.size(1);
+    auto out = torch::empty({N, C}, values.options());
+    const float* v = values.data_ptr<float>();
+    const int64_t* ip = idx.data_ptr<int64_t>();
+    const float* wp = w.data_ptr<float>();
+    float* o = out.data_ptr<float>();
+    at::parallel_for(0, N, 512, [&](int64_t begin, int64_t end) {
+        for (int64_t n = begin; n < end; ++n) {
+            float* dst = o + n * C;
+            for (int64_t c = 0; c < C; ++c) dst[c] = 0.0f;
+            for (int64_t j = 0; j < J; ++j) {
+                const float wj = wp[n * J + j];
+                const float* src = v + ip[n * J + j] * C;
+                for (int64_t c = 0; c < C; ++c) dst[c] += wj * src[c];
+            }
+        }
+    });
+    return out;
+}
+
+// (M, C) gradient of corner_forward's values from g (N, C): each task owns a range of
+// rows and sums into it in sample then corner order (any thread count, the same sums).
+torch::Tensor corner_backward(torch::Tensor g, torch::Tensor idx, torch::Tensor w, int64_t M) {
+    const int64_t N = idx.size(0), J = idx.size(1), C = g.size(1);
+    auto grad = torch::zeros({M, C}, g.options());
+    const float* gp = g.data_ptr<float>();
+    const int64_t* ip = idx.data_ptr<int64_t>();
+    const float* wp = w.data_ptr<float>();
+    float* a = grad.data_ptr<float>();
+    const int64_t n_tasks = std::max<int64_t>(1, at::get_num_threads());
+    at::parallel_for(0, n_tasks, 1, [&](int64_t t0, int64_t t1) {
+        const int64_t lo = M * t0 / n_tasks, hi = M * t1 / n_tasks;
+        for (int64_t q = 0; q < N * J; ++q) {
+            const int64_t r = ip[q];
+            if (r < lo || r >= hi) continue;
+            const float wq = wp[q];
+            const float* src = gp + (q / J) * C;
+            float* dst = a + r * C;
+            for (int64_t c = 0; c < C; ++c) dst[c] += wq * src[c];
+        }
+    });
+    return grad;
 }
 
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("grid_forward", &grid_forward, "fused multi-level grid lookup");
     m.def("grid_backward", &grid_backward, "its table gradient");
+    m.attr("AUX_MAX") = pybind11::make_tuple(PI, PH, PO);   // the MLP's largest sizes
+    m.def("aux_forward", &aux_forward, "the auxiliary NGP: encoding + MLP");
+    m.def("aux_backward", &aux_backward, "its gradients");
+    m.def("coarse_corners", &coarse_corners, "the L_C cells' corners, de-duplicated");
+    m.def("corner_forward", &corner_forward, "the coarse trilinear sum");
+    m.def("corner_backward", &corner_backward, "its gradient");
 }

@@ -71,17 +71,11 @@ class AuxNGP(nn.Module):
         self.w0, self.b0 = _linear(n * cfg.aux_features, cfg.aux_hidden)
         self.w1, self.b1 = _linear(cfg.aux_hidden, cfg.coarse_channels)
 
-    def encode(self, u: torch.Tensor, engine: Engine = TORCH) -> torch.Tensor:
-        """(N, levels * features) hash features at grid coordinates u (N, 3) of L_C-grid
-        corners (``corner / L_C``), looked up by ``engine``."""
-        f = engine.grid_lookup(self.tables, u, self.resolutions, self.dense, self.on_vertices)
-        return f.reshape(len(u), f.shape[1] * f.shape[2])
-
     def forward(self, u: torch.Tensor, engine: Engine = TORCH) -> torch.Tensor:
         """(N, 8 + n_attention) raw coarse channels at grid coordinates u (N, 3) of L_C-grid
-        corners."""
-        h = torch.relu(self.encode(u, engine) @ self.w0 + self.b0)
-        return h @ self.w1 + self.b1
+        corners, computed by ``engine``."""
+        return engine.aux_values(self.tables, u, self.resolutions, self.dense, self.on_vertices,
+                                 self.w0, self.b0, self.w1, self.b1)
 
 
 class NGPRT(nn.Module):
@@ -124,20 +118,16 @@ class NGPRT(nn.Module):
         ((L_C+1)^3, C), e.g. from :meth:`all_corner_values`, corners are read from it.
         """
         R = self.cfg.L_C
-        with stage("corners"):
-            base = ops.cell_index(u, R)
-            corners, w = ops.trilinear_corners(u * float(R), base)
-            ids = (corners[..., 0] * (R + 1) + corners[..., 1]) * (R + 1) + corners[..., 2]
-            if corner_grid is None:
-                uniq, inv = torch.unique(ids.reshape(-1), return_inverse=True)
-                ucorn = torch.stack([uniq // ((R + 1) * (R + 1)), (uniq // (R + 1)) % (R + 1),
-                                     uniq % (R + 1)], -1)
         if corner_grid is not None:                 # no gradient (the occupancy update)
-            return ops.corner_gather(corner_grid, ids, w)
+            corners, w = ops.trilinear_corners(u * float(R), ops.cell_index(u, R))
+            ids = (corners[..., 0] * (R + 1) + corners[..., 1]) * (R + 1) + corners[..., 2]
+            return self.engine.corner_gather(corner_grid, ids, w)
+        with stage("corners"):
+            ucorn, idx, w = self.engine.coarse_corners(u, R)
         with stage("aux"):
             cv = mark(self.corner_values(ucorn), "aux")
         with stage("coarse"):
-            return mark(self.engine.corner_gather(cv, inv.reshape(ids.shape), w), "coarse")
+            return mark(self.engine.corner_gather(cv, idx, w), "coarse")
 
     @torch.no_grad()
     def all_corner_values(self, chunk: int = 1 << 16) -> torch.Tensor:

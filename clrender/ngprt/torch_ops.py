@@ -411,3 +411,33 @@ def grid_lookup(tables: torch.Tensor, u: torch.Tensor, resolutions, dense=None,
         out.append(weighted_gather(flat, idx.reshape(-1, 1), ones)
                    .reshape(len(u), on_vertices, n_feat))
     return torch.cat(out, 1) if len(out) > 1 else out[0]
+
+
+def aux_values(tables: torch.Tensor, u: torch.Tensor, resolutions, dense, on_vertices: int,
+               w0: torch.Tensor, b0: torch.Tensor, w1: torch.Tensor,
+               b1: torch.Tensor) -> torch.Tensor:
+    """(N, O) auxiliary NGP outputs at grid coordinates u (N, 3): :func:`grid_lookup` of
+    tables (n_levels, T, F) flattened to x (N, n_levels * F), then
+    ``relu(x @ w0 + b0) @ w1 + b1`` (w0 (I, H), w1 (H, O))."""
+    f = grid_lookup(tables, u, resolutions, dense, on_vertices)
+    h = torch.relu(f.reshape(len(u), f.shape[1] * f.shape[2]) @ w0 + b0)
+    return h @ w1 + b1
+
+
+def coarse_corners(u: torch.Tensor, res: int):
+    """The batch's L_C-cell corners, each once (docs/ngprt.md "Coarse").
+
+    Args:
+        u: (N, 3) float32 grid coordinates; the cell is clamped to the grid.
+        res: the coarse resolution L_C.
+    Returns:
+        corners: (M, 3) int64 unique corners, in increasing flat id (x slowest).
+        idx: (N, 8) int64 row of each sample's corner in ``corners``.
+        w: (N, 8) float32 trilinear weights (:func:`trilinear_corners`).
+    """
+    R1 = res + 1
+    c, w = trilinear_corners(u * float(res), cell_index(u, res))
+    ids = (c[..., 0] * R1 + c[..., 1]) * R1 + c[..., 2]
+    uniq, inv = torch.unique(ids.reshape(-1), return_inverse=True)
+    corners = torch.stack([uniq // (R1 * R1), (uniq // R1) % R1, uniq % R1], -1)
+    return corners, inv.reshape(ids.shape), w

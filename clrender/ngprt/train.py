@@ -135,7 +135,8 @@ class OccupancyGrid:
             occupied = torch.nonzero(self.binary.reshape(-1))[:, 0]
             pick = occupied[torch.randint(len(occupied), (m,), device=dev)] if len(occupied) \
                 else occupied
-            cells = torch.cat([torch.randint(n, (m,), device=dev), pick])
+            # Sorted, each once: neighbouring cells share corners and table rows in cache.
+            cells = torch.unique(torch.cat([torch.randint(n, (m,), device=dev), pick]))
         # Every corner once when the corner grid is small (CPU presets); per chunk otherwise.
         corner_grid = model.all_corner_values() if (self.R + 1) ** 3 <= 1 << 23 else None
         for i in range(0, n if cells is None else len(cells), chunk):
