@@ -125,9 +125,8 @@ void scatter_levels_f(const std::vector<Level>& lv, const float* gp, const float
     for (int64_t l = begin; l < end; ++l)
         for (int64_t n = 0; n < N; ++n) {
             if (n + AHEAD < N) {
-                corners(lv[l], up + 3 * (n + AHEAD), T - 1, rows, w);
-                for (int j = 0; j < (lv[l].vertex ? 1 : 8); ++j)
-                    __builtin_prefetch(a + (l * T + rows[j]) * F, 1);
+                const int k = corners(lv[l], up + 3 * (n + AHEAD), T - 1, rows, w);
+                for (int j = 0; j < k; ++j) __builtin_prefetch(a + (l * T + rows[j]) * F, 1);
             }
             const int k = corners(lv[l], up + 3 * n, T - 1, rows, w);
             const float* src = gp + (n * n_lev + l) * F;
@@ -185,8 +184,9 @@ torch::Tensor grid_backward(torch::Tensor g, torch::Tensor u, int64_t T,
 
 
 // -- the auxiliary NGP: encoding + MLP (torch_ops.aux_values) ----------------------------
-// The MLP's multiply-adds may be fused (its rounding is not the reference's anyway): from
-// here to the end of the file; the grid code above rounds each product.
+// The MLP's multiply-adds may be fused (its rounding is not the reference's anyway), in
+// this section only; the grid and corner code rounds each product.
+#pragma GCC push_options
 #pragma GCC optimize("fp-contract=fast")
 
 namespace {
@@ -305,8 +305,7 @@ std::vector<torch::Tensor> aux_backward(torch::Tensor g, torch::Tensor xs, torch
         float x[PI];
         v16 h[PH / V], gh[PH / V], dx[PI / V];
         for (int64_t c = c0; c < c1; ++c) {
-            Part& d = part[c];
-            std::memset(&d, 0, sizeof(Part));
+            Part& d = part[c];           // zero-initialised by the vector
             for (int64_t n = c * AUX_CHUNK; n < std::min(M, (c + 1) * AUX_CHUNK); ++n) {
                 for (int64_t i = 0; i < I; ++i) x[i] = xp[n * I + i];
                 mlp.hidden(x, h);
@@ -357,6 +356,8 @@ std::vector<torch::Tensor> aux_backward(torch::Tensor g, torch::Tensor xs, torch
     });
     return {acc, gw0, gb0, gw1, gb1};
 }
+
+#pragma GCC pop_options
 
 // -- the coarse grid's corners (torch_ops.coarse_corners) --------------------------------
 
