@@ -11,6 +11,7 @@ Tolerances, stated before tuning:
   summation order than torch's matmuls; float32 sums of up to 3000 terms); bit for bit
   the same for one thread and two (fixed chunks summed in order).
 - the coarse corners and their de-duplication: bit for bit.
+- the bounded step lattice's occupied samples: bit for bit.
 """
 import pytest
 import torch
@@ -144,6 +145,29 @@ def test_fused_coarse_corners_equal_torch(threads):
         torch.set_num_threads(prev)
     for a, b in zip(got, ref):
         assert a.dtype == b.dtype and torch.equal(a, b)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_fused_bounded_lattice_equals_torch(threads):
+    """Rays from outside and inside the box, some missing it, some along an axis (zero
+    direction components); a random occupancy grid; two steps."""
+    g = torch.Generator().manual_seed(0)
+    o = torch.randn(700, 3, generator=g) * 1.5
+    d = torch.randn(700, 3, generator=g)
+    d[:50, 1:] = 0.0                                        # along x
+    d = d / d.norm(dim=-1, keepdim=True)
+    occ = torch.rand(16, 16, 16, generator=g) < 0.3
+    prev = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        for s in (0.0135, 0.1):
+            ref = ops.lattice_samples(o, d, occ, s, 0.05, 10.0, 1.0, False)
+            got = fused.lattice_samples(o, d, occ, s, 0.05, 10.0, 1.0, False)
+            assert len(ref[0]) > 400                  # not a trivial comparison
+            for a, b in zip(got, ref):
+                assert a.dtype == b.dtype and torch.equal(a, b)
+    finally:
+        torch.set_num_threads(prev)
 
 
 def test_fused_lookup_refuses_bad_input():

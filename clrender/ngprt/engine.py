@@ -4,8 +4,8 @@
   specification; CPU and CUDA).
 * ``fast``: their fused twins in :mod:`clrender.ngprt.fused`, a C++ extension (built with
   the machine's compiler at first use): the fine levels' lookup, the auxiliary NGP
-  (encoding + MLP) at the batch's L_C corners, the corners' de-duplication and the coarse
-  trilinear sum (CPU only).
+  (encoding + MLP) at the batch's L_C corners, the corners' de-duplication, the coarse
+  trilinear sum and the bounded scenes' ray sampling (CPU only).
 
 Both engines train the same model with the same math; ``tests/test_fused.py`` compares
 their values and gradients.
@@ -34,9 +34,11 @@ class Engine:
     corner_gather: Callable
     aux_values: Callable
     coarse_corners: Callable
+    lattice_samples: Callable
 
 
-TORCH = Engine("torch", ops.grid_lookup, ops.corner_gather, ops.aux_values, ops.coarse_corners)
+TORCH = Engine("torch", ops.grid_lookup, ops.corner_gather, ops.aux_values, ops.coarse_corners,
+               ops.lattice_samples)
 
 
 def get(name: str, device) -> Engine:
@@ -59,4 +61,4 @@ def get(name: str, device) -> Engine:
                            f"build (it needs g++ and ninja; --engine torch trains without "
                            f"them): {e}") from e
     return Engine("fast", fused.grid_lookup, fused.corner_gather, fused.aux_values,
-                  fused.coarse_corners)
+                  fused.coarse_corners, fused.lattice_samples)

@@ -3,7 +3,8 @@ Functions with the signatures and results of their :mod:`clrender.ngprt.torch_op
 specifications (CPU, float32): :func:`grid_lookup` (the fine levels),
 :func:`aux_values` (the auxiliary NGP's encoding and MLP in one pass, its hidden layer
 recomputed in the backward from the stored features, never stored), :func:`coarse_corners` (bit for bit) and
-:func:`corner_gather` (the coarse trilinear sum).
+:func:`corner_gather` (the coarse trilinear sum) and :func:`lattice_samples` (the bounded
+step lattice's occupied points, bit for bit).
 
 The extension is compiled with the machine's C++ compiler at first use
 (``torch.utils.cpp_extension.load``, cached by torch under ``$TORCH_EXTENSIONS_DIR``;
@@ -23,6 +24,8 @@ import time
 from pathlib import Path
 
 import torch
+
+from . import torch_ops as ops
 
 SOURCE = Path(__file__).resolve().parent / "fused_grid.cpp"
 # No FMA contraction: the reference rounds each product (the bit-identical gradients).
@@ -148,3 +151,18 @@ def corner_gather(values: torch.Tensor, idx: torch.Tensor, w: torch.Tensor) -> t
     if idx.dtype != torch.int64:
         raise ValueError(f"fused corner_gather: int64 idx expected, got {idx.dtype}")
     return _CornerGather.apply(values.contiguous(), idx.contiguous(), w.contiguous())
+
+
+def lattice_samples(origins, dirs, occupancy, s: float, near: float, far: float, extent: float,
+                    unbounded: bool):
+    """:func:`clrender.ngprt.torch_ops.lattice_samples`, fused for bounded scenes (one pass
+    a ray, writing only the occupied points: the same samples bit for bit); unbounded
+    scenes, whose contracted lattice is not fused, take the torch function itself."""
+    if unbounded:
+        return ops.lattice_samples(origins, dirs, occupancy, s, near, far, extent, unbounded)
+    _cpu_float32("lattice_samples", origins=origins, dirs=dirs)
+    if occupancy.dtype != torch.bool:
+        raise ValueError(f"fused lattice_samples: bool occupancy expected, got {occupancy.dtype}")
+    return tuple(_extension()[0].lattice_bounded(origins.contiguous(), dirs.contiguous(),
+                                                 occupancy.contiguous(), float(s), float(near),
+                                                 float(extent)))

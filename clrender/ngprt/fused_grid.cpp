@@ -103,7 +103,7 @@ inline void prefetch(const std::vector<Level>& lv, const float* tab, int64_t T, 
 }
 
 // Samples between a row's prefetch and its read.
-constexpr int64_t AHEAD = 8;
+constexpr int64_t AHEAD = 16;
 
 inline void lookup(const std::vector<Level>& lv, const float* tab, int64_t T, int64_t F,
                    const float* u, float* dst) {
@@ -476,6 +476,85 @@ torch::Tensor corner_backward(torch::Tensor g, torch::Tensor idx, torch::Tensor 
     return grad;
 }
 
+// -- the bounded step lattice (torch_ops.lattice_samples, bounded scenes) ----------------
+
+// The lattice points t_k = k * s of rays (R, 3) (unit dirs) inside [-extent, extent]^3 from
+// `near`, kept where their L_C cell of `occupancy` (R_C^3 bool) is set: [ray_ids, k (M,)
+// int64; t, delta (M,) float32; u (M, 3) float32], ray-major, k increasing; torch_ops'
+// float32 operations, so the same samples bit for bit.
+std::vector<torch::Tensor> lattice_bounded(torch::Tensor origins, torch::Tensor dirs,
+                                           torch::Tensor occupancy, double s, double near,
+                                           double extent) {
+    const int64_t n_rays = origins.size(0), R = occupancy.size(0);
+    const float* op = origins.data_ptr<float>();
+    const float* dp = dirs.data_ptr<float>();
+    const bool* occ = occupancy.data_ptr<bool>();
+    const float st = (float)s, nr = (float)near, ex = (float)extent, ex2 = (float)(2.0 * extent);
+    constexpr int64_t RAYS = 64;                     // rays per task
+    const int64_t n_tasks = (n_rays + RAYS - 1) / RAYS;
+    struct Out { std::vector<int64_t> ray, k; std::vector<float> t, delta, u; };
+    std::vector<Out> outs(n_tasks);
+    at::parallel_for(0, n_tasks, 1, [&](int64_t b0, int64_t b1) {
+        for (int64_t b = b0; b < b1; ++b) {
+            Out& out = outs[b];
+            for (int64_t r = b * RAYS; r < std::min(n_rays, (b + 1) * RAYS); ++r) {
+                const float* o = op + 3 * r;
+                const float* d = dp + 3 * r;
+                float lo[3], hi[3];
+                for (int a = 0; a < 3; ++a) {        // ray_box
+                    const float inv = 1.0f / d[a];
+                    const float t0 = (-ex - o[a]) * inv, t1 = (ex - o[a]) * inv;
+                    lo[a] = std::fmin(t0, t1);
+                    hi[a] = std::fmax(t0, t1);
+                }
+                const float t_in = std::fmax(std::fmax(lo[0], lo[1]), lo[2]);
+                const float t_end = std::fmin(std::fmin(hi[0], hi[1]), hi[2]);
+                const float t_start = std::isnan(t_in) ? t_in : std::max(t_in, nr);
+                const float k0f = std::ceil(t_start / st);
+                const float nf = std::max(std::ceil(t_end / st) - k0f + 1.0f, 0.0f);
+                if (!(nf > 0.0f) || !std::isfinite(k0f)) continue;    // missed (or NaN): none
+                const int64_t k0 = (int64_t)k0f, n = (int64_t)nf;
+                for (int64_t k = k0; k < k0 + n; ++k) {
+                    const float g = (float)k * st;
+                    if (!(g < t_end)) break;
+                    float u[3];
+                    int64_t c[3];
+                    for (int a = 0; a < 3; ++a) {
+                        const float x = o[a] + g * d[a];
+                        u[a] = (x + ex) / ex2;
+                        const float f = std::min(std::max(std::floor(u[a] * (float)R), 0.0f),
+                                                 (float)(R - 1));
+                        c[a] = (int64_t)f;
+                    }
+                    if (!occ[(c[0] * R + c[1]) * R + c[2]]) continue;
+                    out.ray.push_back(r);
+                    out.k.push_back(k);
+                    out.t.push_back(g);
+                    out.delta.push_back((float)(k + 1) * st - g);
+                    out.u.insert(out.u.end(), u, u + 3);
+                }
+            }
+        }
+    });
+    int64_t M = 0;
+    for (const Out& out : outs) M += (int64_t)out.ray.size();
+    auto i64 = origins.options().dtype(torch::kInt64);
+    auto ray_ids = torch::empty({M}, i64), ks = torch::empty({M}, i64);
+    auto t = torch::empty({M}, origins.options()), delta = torch::empty({M}, origins.options());
+    auto u = torch::empty({M, 3}, origins.options());
+    int64_t at = 0;
+    for (const Out& out : outs) {
+        const int64_t m = (int64_t)out.ray.size();
+        std::copy(out.ray.begin(), out.ray.end(), ray_ids.data_ptr<int64_t>() + at);
+        std::copy(out.k.begin(), out.k.end(), ks.data_ptr<int64_t>() + at);
+        std::copy(out.t.begin(), out.t.end(), t.data_ptr<float>() + at);
+        std::copy(out.delta.begin(), out.delta.end(), delta.data_ptr<float>() + at);
+        std::copy(out.u.begin(), out.u.end(), u.data_ptr<float>() + 3 * at);
+        at += m;
+    }
+    return {ray_ids, ks, t, delta, u};
+}
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("grid_forward", &grid_forward, "fused multi-level grid lookup");
     m.def("grid_backward", &grid_backward, "its table gradient");
@@ -485,4 +564,5 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("coarse_corners", &coarse_corners, "the L_C cells' corners, de-duplicated");
     m.def("corner_forward", &corner_forward, "the coarse trilinear sum");
     m.def("corner_backward", &corner_backward, "its gradient");
+    m.def("lattice_bounded", &lattice_bounded, "the bounded step lattice's kept samples");
 }

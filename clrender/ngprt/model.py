@@ -210,7 +210,7 @@ def render_rays(model: NGPRT, origins: torch.Tensor, dirs: torch.Tensor,
     cfg, n = model.cfg, len(origins)
     s = float(torch.tensor(gamma * cfg.s0 if step is None else step, dtype=torch.float32))
     with stage("rays"):
-        ray_ids, k, t, delta, u = ops.lattice_samples(
+        ray_ids, k, t, delta, u = model.engine.lattice_samples(
             origins, dirs, occupancy, s, cfg.near, cfg.far, cfg.extent, cfg.scene == "unbounded")
     sigma, feat = model.sample(u)
     with stage("compositing"):
