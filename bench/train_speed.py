@@ -162,10 +162,7 @@ def _corner_count(model: NGPRT, t: _Trainer) -> tuple[float, float]:
     s = float(torch.tensor(t.gamma * cfg.s0, dtype=torch.float32))
     u = ops.lattice_samples(o, d, t.occ.binary, s, cfg.near, cfg.far, cfg.extent,
                             cfg.scene == "unbounded")[4]
-    R = cfg.L_C
-    corners, _ = ops.trilinear_corners(u * float(R), ops.cell_index(u, R))
-    ids = (corners[..., 0] * (R + 1) + corners[..., 1]) * (R + 1) + corners[..., 2]
-    return float(len(u)), float(len(torch.unique(ids)))
+    return float(len(u)), float(len(ops.coarse_corners(u, cfg.L_C)[0]))
 
 
 def summarise(t: _Trainer, occ_s: float) -> dict:

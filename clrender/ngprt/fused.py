@@ -1,8 +1,8 @@
 """The fast engine's fused stages: a C++ extension (``fused_grid.cpp``) behind autograd
 Functions with the signatures and results of their :mod:`clrender.ngprt.torch_ops`
-specifications (CPU, float32): :func:`grid_lookup` (the fine levels),
-:func:`aux_values` (the auxiliary NGP's encoding and MLP in one pass, its hidden layer
-recomputed in the backward from the stored features, never stored), :func:`coarse_corners` (bit for bit) and
+specifications (CPU, float32): :func:`grid_lookup` (the fine levels), :func:`aux_values`
+(the auxiliary NGP's encoding and MLP in one pass; its hidden layer is never stored, the
+backward recomputes it from the stored features), :func:`coarse_corners` (bit for bit),
 :func:`corner_gather` (the coarse trilinear sum) and :func:`lattice_samples` (the bounded
 step lattice's occupied points, bit for bit).
 
