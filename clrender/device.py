@@ -131,7 +131,7 @@ def device_type_name(device: cl.Device) -> str:
 
 def _describe(devices: list[cl.Device]) -> str:
     if not devices:
-        return "  (no OpenCL platform found: install pocl-binary-distribution or a vendor driver)"
+        return "  (no OpenCL platform found: install Debian's pocl-opencl-icd, pip's intel-opencl-rt or a vendor driver)"
     lines = []
     for i, d in enumerate(devices):
         lines.append(f"  [{i}] {d.platform.name.strip()} / {d.name.strip()} "

@@ -30,7 +30,7 @@ def pytest_configure(config):
 
 
 # The CPU OpenCL implementations the kernel tests run on (cl_platform): PoCL (Debian's or
-# pip's) and Intel's CPU runtime from pip (clrender/icd.py registers it).
+# pip's, the [pocl] extra) and Intel's CPU runtime from pip (clrender/icd.py registers it).
 CL_PLATFORMS = {"pocl": "Portable Computing Language", "intel": "Intel(R) OpenCL"}
 _INSTALL = {"intel": "pip install intel-opencl-rt intel-cmplr-lib-rt tbb",
             "pocl": "apt install pocl-opencl-icd, or pip install pocl-binary-distribution"}
