@@ -116,7 +116,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="builtin-bounded | builtin-unbounded | a dataset folder (default: the table's)")
     p.add_argument("--downscale", type=int, default=1, metavar="N",
                    help="of a --scene folder: read its images_N/, else shrink its images N "
-                        "times (tables only; default 1)")
+                        "times (default 1)")
+    p.add_argument("--option", default=None, metavar="NAME=V1,V2",
+                   help=f"{train_curve.KEY}: a curve for each value of one of the method's "
+                        f"training options (e.g. engine=torch,fast), compared with the first "
+                        f"at equal steps when --seeds >= 2")
+    p.add_argument("--test-stride", type=whole_number("test stride"), default=1, metavar="K",
+                   help=f"{train_curve.KEY}: score every K-th test view (default 1: all)")
     p.add_argument("--device", default=None, help="OpenCL device spec (see `clrender info`)")
     p.add_argument("--torch-device", default=None, help="torch device for training")
     p.add_argument("--out", type=Path, default=Path("results"))
@@ -156,9 +162,10 @@ def main(argv=None) -> int:
             raise ValueError(f"--method is for {train_curve.KEY}; a table names its methods")
         args.method = args.method or methods.default()
         args.preset = None if curve else (args.presets or [None])[0]
-        if args.downscale < 1 or (curve and args.downscale != 1):
-            raise ValueError(f"--downscale {args.downscale}: expected a whole number >= 1, "
-                             f"for tables only (not {train_curve.KEY})")
+        if args.downscale < 1:
+            raise ValueError(f"--downscale {args.downscale}: expected a whole number >= 1")
+        if not curve and (args.option is not None or args.test_stride != 1):
+            raise ValueError(f"--option and --test-stride are for {train_curve.KEY}")
         if (curve or args.executor != "ray") and args.address is not None:
             raise ValueError("--address is for --executor ray")
         if curve and args.executor == "ray":

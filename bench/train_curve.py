@@ -2,6 +2,8 @@
 
     python -m bench.run train-curve                        # NGP-RT, `cpu` and `tiny` presets
     python -m bench.run train-curve --method ndrf --preset tiny --out results/
+    python -m bench.run train-curve --preset cpu --option engine=torch,fast --seeds 3
+    python -m bench.run train-curve --preset cpu --scene data/lego --downscale 4 --test-stride 2
 
 Trains the baseline row of the method's ``CURVE_TABLE`` (NGP-RT: Table 2's separate-v,
 L = 2; NDRF: the full model of its Table 3) from scratch into a fresh run folder
@@ -11,7 +13,13 @@ test view with the OpenCL renderer, as the tables do. The x axis counts training
 (data loading, mesh extraction and distillation views included, evaluations excluded); each
 evaluation's time is recorded beside it. A method with a teacher (NDRF) has it trained (or
 taken from the model cache) first, and the teacher's test PSNR is drawn as a horizontal
-line. Writes ``OUT/train-curve.{csv,png}``.
+line. ``--option NAME=V1,V2,..`` draws a curve for each value of one of the method's
+training options (e.g. NGP-RT's ``engine``), each trained for the same steps and evaluated
+after the same ones; with ``--seeds N`` >= 2 each value after the first is compared with
+the first at every evaluated step, paired by seed: the mean test-PSNR difference and its
+95% t interval (:mod:`bench.seeds`). ``--downscale`` reads a dataset folder as the tables
+do, ``--test-stride K`` scores every K-th test view (the first included). Writes
+``OUT/train-curve.{csv,png}``.
 """
 from __future__ import annotations
 
@@ -34,8 +42,8 @@ KEY = "train-curve"
 TITLE = "time-to-quality: test PSNR vs training minutes (the baseline row of a method's table)"
 PRESETS = ("cpu", "tiny")           # default --preset
 N_POINTS = 12
-COLUMNS = ("method", "preset", "seed", "step", "train_seconds", "eval_seconds", "test_psnr",
-           "test_ssim", "train_psnr", "teacher_test_psnr")
+COLUMNS = ("method", "preset", "option", "seed", "step", "train_seconds", "eval_seconds",
+           "test_psnr", "test_ssim", "train_psnr", "teacher_test_psnr")
 
 
 def baseline_row(method: str):
@@ -100,41 +108,84 @@ class Evaluator:
                    f"{result['mean']['psnr']:.2f} dB (evaluated in {self._resumed - now:.1f} s)")
 
 
+def option_values(method: str, text: str) -> tuple[str, list]:
+    """``NAME=V1,V2,..`` (``--option``) as the name of one of ``method``'s training options
+    and its values, each converted to the option's type and checked; ValueError otherwise."""
+    plugin = methods.get(method)
+    name, sep, values = text.partition("=")
+    opt = plugin.TRAIN_OPTIONS.get(name)
+    if not sep or opt is None or not values or opt.nargs:
+        raise ValueError(f"--option {text!r}: expected NAME=V1[,V2..] with NAME one of "
+                         f"{method}'s training options of one value: "
+                         f"{', '.join(k for k, o in plugin.TRAIN_OPTIONS.items() if not o.nargs)}")
+    convert = (lambda v: v.lower() in ("1", "true", "yes")) if opt.type is bool else opt.type
+    out = []
+    for v in values.split(","):
+        try:
+            out.append(convert(v))
+        except ValueError:
+            raise ValueError(f"--option {text!r}: {v!r} is not a {opt.type.__name__}") from None
+        opt.check(name, out[-1])
+    return name, out
+
+
+def test_views(data: Path, downscale: int = 1, stride: int = 1):
+    """The test split of ``data`` (:func:`clrender.data.load_dataset`), every ``stride``-th
+    view from the first."""
+    from dataclasses import replace
+
+    from clrender.data import load_dataset
+
+    if stride < 1:
+        raise ValueError(f"--test-stride must be >= 1, got {stride}")
+    ds = load_dataset(data, split="test", downscale=downscale)
+    if stride == 1:
+        return ds
+    keep = list(range(0, len(ds.cameras), stride))
+    return replace(ds, images=ds.images[keep], cameras=[ds.cameras[i] for i in keep],
+                   alpha=None if ds.alpha is None else ds.alpha[keep])
+
+
 def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: int = 0,
                   device=None, torch_device=None, iterations: int | None = None,
                   n_points: int = N_POINTS, progress: bool = True,
-                  method: str | None = None) -> list[dict]:
+                  method: str | None = None, option: dict | None = None,
+                  downscale: int = 1, test_stride: int = 1) -> list[dict]:
     """Train the baseline row's model of ``method`` from scratch with ``preset`` and
     evaluate it along the way.
 
     Args:
         root: the cache folder; the run goes to ``root/curves/<key>/run`` (emptied first);
             a teacher is taken from (or trained into) the model cache.
-        data, fingerprint: the dataset folder and :func:`bench.cache.data_fingerprint`.
+        data, fingerprint: the dataset folder and :func:`bench.cache.data_fingerprint`
+            (of ``downscale``).
         iterations: override of the preset's iteration count (quick runs, tests).
+        option: training options set over the row's (``{"engine": "fast"}``).
+        downscale, test_stride: the dataset's scale and the test views' stride
+            (:func:`test_views`).
     Returns:
         one dict per evaluation, :data:`COLUMNS`; ``train_psnr`` is the training batch's
-        PSNR logged at that step; ``teacher_test_psnr`` the teacher's (None without one).
+        PSNR logged at that step; ``teacher_test_psnr`` the teacher's (None without one);
+        ``option`` the ``option`` given, as ``name=value``.
     """
-    from clrender.data import load_dataset
     from clrender.evaluate import evaluate
     from clrender.runs import read_log
 
     method = method or methods.default()
     plugin, row = methods.get(method), baseline_row(method)
-    options = dict(row.model)
+    options = {**row.model, **(option or {})}
     teacher_option = plugin.TEACHER and plugin.TEACHER.option
     n_iter, log_every = plugin.train_steps(preset, iterations)
     steps = eval_steps(n_iter, log_every, n_points)
     spec = {"method": method, **plugin.model_spec(preset, **{k: v for k, v in options.items()
                                                              if k != teacher_option}),
             "code": code_fingerprint(method), "iterations": n_iter, "data": fingerprint,
-            "seed": seed, "steps": steps}
-    test_set, teacher_psnr = load_dataset(data, split="test"), None
+            "seed": seed, "steps": steps, "test_stride": test_stride}
+    test_set, teacher_psnr = test_views(data, downscale, test_stride), None
     if teacher_option in options:
         teacher = cache.ensure_model(root, data, fingerprint, preset, plugin.TEACHER.method,
                                      options[teacher_option], seed=seed,
-                                     torch_device=torch_device)
+                                     torch_device=torch_device, downscale=downscale)
         teacher_psnr = evaluate(teacher.baked, test_set, device=device)["mean"]["psnr"]
         options[teacher_option], spec["teacher"] = str(teacher.baked), teacher.key
     key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:16]
@@ -142,9 +193,11 @@ def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: i
     shutil.rmtree(run_dir, ignore_errors=True)
     hook = Evaluator(method, steps, test_set, row.render, device)
     plugin.train(str(data), run_dir, preset, seed=seed, iterations=n_iter,
-                 torch_device=torch_device, progress=progress, on_step=hook, **options)
+                 torch_device=torch_device, progress=progress, on_step=hook,
+                 downscale=downscale, **options)
     logged = {rec["step"]: rec["psnr"] for rec in read_log(run_dir)}
-    return [{"method": method, "preset": preset, "seed": seed, **p,
+    label = ",".join(f"{k}={v}" for k, v in (option or {}).items())
+    return [{"method": method, "preset": preset, "option": label, "seed": seed, **p,
              "train_psnr": logged.get(p["step"]), "teacher_test_psnr": teacher_psnr}
             for p in hook.points]
 
@@ -156,13 +209,21 @@ def _plot(points: list[dict], meta: dict) -> bytes:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4.2))
-    for preset in dict.fromkeys(p["preset"] for p in points):
-        pts = [p for p in points if p["preset"] == preset]
-        line, = ax.plot([p["train_seconds"] / 60 for p in pts], [p["test_psnr"] for p in pts],
-                        marker="o", label=f"{preset} (seed {pts[0]['seed']})")
-        if pts[0].get("teacher_test_psnr") is not None:
-            ax.axhline(pts[0]["teacher_test_psnr"], color=line.get_color(), linestyle="--",
-                       label=f"{preset}: teacher")
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    groups = list(dict.fromkeys((p["preset"], p.get("option", "")) for p in points))
+    for g, (preset, option) in enumerate(groups):
+        name = f"{preset} {option}".strip()
+        mine = [p for p in points if (p["preset"], p.get("option", "")) == (preset, option)]
+        seeds = list(dict.fromkeys(p["seed"] for p in mine))
+        for i, seed in enumerate(seeds):      # one colour a curve, one line a seed
+            pts = [p for p in mine if p["seed"] == seed]
+            ax.plot([p["train_seconds"] / 60 for p in pts], [p["test_psnr"] for p in pts],
+                    marker="o", color=colours[g % len(colours)], alpha=1.0 if i == 0 else 0.55,
+                    label=f"{name} (seed{'s' if len(seeds) > 1 else ''} "
+                          f"{', '.join(map(str, seeds))})" if i == 0 else None)
+        if mine[0].get("teacher_test_psnr") is not None:
+            ax.axhline(mine[0]["teacher_test_psnr"], color=colours[g % len(colours)],
+                       linestyle="--", label=f"{name}: teacher")
     ax.set_xlabel("training wall-clock (min, evaluations excluded)")
     ax.set_ylabel("test PSNR (dB), baked model, OpenCL")
     row = f": {meta['row']}" if meta.get("row") else ""
@@ -189,34 +250,79 @@ def write_curve(out_dir: Path, points: list[dict], meta: dict) -> str:
     writer = csv.writer(buf)
     writer.writerow(COLUMNS)
     for p in points:
-        writer.writerow([p["method"], p["preset"], p["seed"], p["step"],
+        writer.writerow([p["method"], p["preset"], p.get("option", ""), p["seed"], p["step"],
                          f"{p['train_seconds']:.2f}", f"{p['eval_seconds']:.2f}",
                          f"{p['test_psnr']:.4f}", f"{p['test_ssim']:.4f}",
                          _cell(p["train_psnr"]), _cell(p["teacher_test_psnr"])])
     write_atomic(Path(out_dir) / f"{KEY}.csv", buf.getvalue())
     write_atomic(Path(out_dir) / f"{KEY}.png", _plot(points, meta))
-    lines = [f"{'preset':8s} {'step':>6s} {'train min':>9s} {'eval s':>7s} {'test PSNR':>9s} "
-             f"{'SSIM':>6s} {'train PSNR':>10s} {'teacher':>8s}"]
-    lines += [f"{p['preset']:8s} {p['step']:6d} {p['train_seconds'] / 60:9.2f} "
+    lines = [f"{'preset':8s} {'option':13s} {'seed':>4s} {'step':>6s} {'train min':>9s} "
+             f"{'eval s':>7s} {'test PSNR':>9s} {'SSIM':>6s} {'train PSNR':>10s} {'teacher':>8s}"]
+    lines += [f"{p['preset']:8s} {p.get('option', ''):13s} {p['seed']:4d} {p['step']:6d} "
+              f"{p['train_seconds'] / 60:9.2f} "
               f"{p['eval_seconds']:7.1f} {p['test_psnr']:9.2f} {p['test_ssim']:6.3f} "
               f"{_cell(p['train_psnr'], '{:10.2f}') or '       n/a'} "
               f"{_cell(p['teacher_test_psnr'], '{:8.2f}') or '     n/a'}" for p in points]
     return "\n".join(lines)
 
 
+def compare_options(points: list[dict]) -> list[dict]:
+    """Per preset, each ``option`` value after the first against the first at every step
+    both evaluated, paired by seed (two or more): ``{preset, option, against, step, n,
+    mean, lo, hi}``, the mean test-PSNR difference (dB) and its 95% t interval."""
+    from bench import seeds
+
+    out = []
+    for preset in dict.fromkeys(p["preset"] for p in points):
+        mine = [p for p in points if p["preset"] == preset]
+        options = list(dict.fromkeys(p.get("option", "") for p in mine))
+        psnr = {(p.get("option", ""), p["seed"], p["step"]): p["test_psnr"] for p in mine}
+        for option in options[1:]:
+            for step in sorted({p["step"] for p in mine}):
+                pairs = [(psnr[option, s, step], psnr[options[0], s, step])
+                         for s in sorted({p["seed"] for p in mine})
+                         if (option, s, step) in psnr and (options[0], s, step) in psnr]
+                if len(pairs) < 2:
+                    continue
+                mean, std = seeds.paired_delta(*zip(*pairs))
+                lo, hi = seeds.interval(mean, std, len(pairs))
+                out.append({"preset": preset, "option": option, "against": options[0],
+                            "step": step, "n": len(pairs), "mean": mean, "lo": lo, "hi": hi})
+    return out
+
+
+def _comparison_text(rows: list[dict]) -> str:
+    if not rows:
+        return ""
+    lines = ["", "test PSNR difference at equal steps, paired by seed (95% t interval):"]
+    lines += [f"{r['preset']:8s} {r['option']} - {r['against']} step {r['step']:6d}: "
+              f"{r['mean']:+.2f} dB [{r['lo']:+.2f}, {r['hi']:+.2f}] (n = {r['n']}), "
+              f"{'0 inside' if r['lo'] <= 0 <= r['hi'] else 'differs'}" for r in rows]
+    return "\n".join(lines)
+
+
 def run(args, meta: dict) -> str:
     """``python -m bench.run train-curve``: every ``--preset``'s curve (default
-    :data:`PRESETS`) of ``--method`` into ``args.out``, the files rewritten after each
-    preset; returns the text table."""
+    :data:`PRESETS`) of ``--method``, for each ``--option`` value and seed, into
+    ``args.out``, the files rewritten after each curve; returns the text table (with the
+    options' comparison, :func:`compare_options`)."""
     row = baseline_row(args.method)
     scene = args.scene or ablation.load_table(methods.get(args.method).CURVE_TABLE).scene
     data = cache.resolve_scene(scene, args.cache)
-    fingerprint = cache.data_fingerprint(data)
-    meta = {**meta, "scene": scene, "method": args.method, "row": row.name}
+    fingerprint = cache.data_fingerprint(data, args.downscale)
+    name, values = option_values(args.method, args.option) if args.option else (None, [None])
+    meta = {**meta, "scene": scene if args.downscale == 1
+            else f"{scene} (downscale {args.downscale})", "method": args.method,
+            "row": row.name if args.test_stride == 1
+            else f"{row.name}, every {args.test_stride}th test view"}
     points, text = [], ""
     for preset in args.presets or PRESETS:
-        points += measure_curve(args.cache, data, fingerprint, preset, seed=args.seed,
-                                device=args.device, torch_device=args.torch_device,
-                                method=args.method)
-        text = write_curve(args.out, points, meta)
-    return text
+        for value in values:
+            for seed in range(args.seed, args.seed + args.seeds):
+                points += measure_curve(args.cache, data, fingerprint, preset, seed=seed,
+                                        device=args.device, torch_device=args.torch_device,
+                                        method=args.method,
+                                        option=None if name is None else {name: value},
+                                        downscale=args.downscale, test_stride=args.test_stride)
+                text = write_curve(args.out, points, meta)
+    return text + _comparison_text(compare_options(points))

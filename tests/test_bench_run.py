@@ -176,7 +176,7 @@ def test_downscale_reaches_the_test_set_the_models_and_their_fingerprint(fake_tr
     assert fake_training == [("load", "test", 4), ("ngprt", 0, 4), ("ndrf", 0, 4),
                              ("pair", "0", "0")]
     assert "downscale 4" in (tmp_path / "out" / "ndrf-teacher.md").read_text()
-    assert run.main(["train-curve", "--downscale", "2"] + common) == 2
+    assert run.main(["ndrf-teacher", "--test-stride", "2"] + common) == 2   # curves only
 
 
 def test_fingerprint_holds_the_downscale(tmp_path):

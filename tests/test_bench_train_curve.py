@@ -52,6 +52,65 @@ def test_run_writes_every_preset_to_one_csv_and_png(tmp_path, monkeypatch, capsy
     assert "test PSNR" in capsys.readouterr().out
 
 
+def test_option_values_seeds_downscale_and_stride_reach_every_curve(tmp_path, monkeypatch,
+                                                                    capsys):
+    """`--option engine=torch,fast --seeds 2`: a curve per value and seed, each given the
+    downscale and the test stride, and each value after the first compared with the first
+    at every step, paired by seed."""
+    calls = []
+
+    def fake_curve(root, data, fingerprint, preset, seed=0, option=None, downscale=1,
+                   test_stride=1, **kwargs):
+        calls.append((preset, option, seed, downscale, test_stride))
+        fast = option == {"engine": "fast"}
+        return [{"method": "ngprt", "preset": preset, "option": f"engine={option['engine']}",
+                 "seed": seed, "step": s, "train_seconds": 1.0 + s, "eval_seconds": 1.0,
+                 "test_psnr": 20.0 + s + (0.5 + 0.1 * seed if fast else 0.0),
+                 "test_ssim": 0.5, "train_psnr": 12.0, "teacher_test_psnr": None}
+                for s in (0, 10)]
+
+    monkeypatch.setattr(train_curve, "measure_curve", fake_curve)
+    (tmp_path / "scene").mkdir()
+    out = tmp_path / "out"
+    assert run.main(["train-curve", "--preset", "tiny", "--option", "engine=torch,fast",
+                     "--seeds", "2", "--downscale", "2", "--test-stride", "3",
+                     "--scene", str(tmp_path / "scene"), "--cache", str(tmp_path / "cache"),
+                     "--out", str(out)]) == 0
+    assert calls == [("tiny", {"engine": e}, s, 2, 3) for e in ("torch", "fast") for s in (0, 1)]
+    rows = list(csv.DictReader((out / "train-curve.csv").open()))
+    assert [(r["option"], r["seed"]) for r in rows][::2] == \
+        [("engine=torch", "0"), ("engine=torch", "1"), ("engine=fast", "0"), ("engine=fast", "1")]
+    text = capsys.readouterr().out
+    # differences 0.5 and 0.6 dB: mean 0.55, std 0.0707, t(0.975, 1) = 12.706: +- 0.635
+    assert "engine=fast - engine=torch step      0: +0.55 dB [-0.09, +1.19] (n = 2), 0 inside" in text
+    points = [dict(r, seed=int(r["seed"]), step=int(r["step"]), test_psnr=float(r["test_psnr"]))
+              for r in rows]
+    (c0, c10) = train_curve.compare_options(points)
+    assert (c0["step"], c10["step"]) == (0, 10)
+    assert c0["mean"] == pytest.approx(0.55) and c0["lo"] < 0 < c0["hi"]
+
+
+@pytest.mark.parametrize("text, message", [
+    ("engine", "expected NAME=V1"), ("colour=red", "expected NAME=V1"),
+    ("engine=warp", "engine"), ("L=two", "'two' is not a int")])
+def test_option_values_refuse_what_the_method_does_not_take(text, message):
+    with pytest.raises(ValueError, match=message):
+        train_curve.option_values("ngprt", text)
+    assert train_curve.option_values("ngprt", "L=2,3") == ("L", [2, 3])
+
+
+def test_test_stride_keeps_every_kth_view_from_the_first(tmp_path):
+    from clrender.data import make_scene
+
+    scene = make_scene("bounded", tmp_path / "scene", seed=1, n_train=2, n_test=5, width=8,
+                       height=8)
+    full = train_curve.test_views(scene)
+    some = train_curve.test_views(scene, stride=2)
+    assert len(full.cameras) == 5 and len(some.cameras) == len(some.images) == 3
+    assert all((a.c2w == b.c2w).all() for a, b in zip(some.cameras, full.cameras[::2]))
+    assert (some.images == full.images[::2]).all()
+
+
 @pytest.mark.slow
 def test_tiny_curve_measures_the_deployed_model_without_changing_training(tmp_path,
                                                                           one_torch_thread):
