@@ -462,6 +462,46 @@ std::vector<torch::Tensor> coarse_corners(torch::Tensor u, int64_t R) {
     return {corners, idx, w};
 }
 
+namespace {
+
+// The coarse trilinear sum and its gradient for C channels; CC > 0: C known at compile
+// time (the presets' 12 and 16: 8 features + 2 L attention logits), so the channel loops
+// are vector code.
+template <int CC>
+void corner_sum(const float* v, const int64_t* ip, const float* wp, int64_t J, int64_t Cr,
+                int64_t begin, int64_t end, float* o) {
+    const int64_t C = CC > 0 ? CC : Cr;
+    for (int64_t n = begin; n < end; ++n) {
+        float acc[CC > 0 ? CC : 1] = {};
+        float* dst = CC > 0 ? acc : o + n * C;
+        if (CC == 0)
+            for (int64_t c = 0; c < C; ++c) dst[c] = 0.0f;
+        for (int64_t j = 0; j < J; ++j) {
+            const float wj = wp[n * J + j];
+            const float* src = v + ip[n * J + j] * C;
+            for (int64_t c = 0; c < C; ++c) dst[c] += wj * src[c];
+        }
+        if (CC > 0)
+            for (int64_t c = 0; c < C; ++c) o[n * C + c] = acc[c];
+    }
+}
+
+template <int CC>
+void corner_scatter(const float* gp, const int64_t* ip, const float* wp, int64_t NJ, int64_t J,
+                    int64_t Cr, int64_t lo, int64_t hi, float* a) {
+    const int64_t C = CC > 0 ? CC : Cr;
+    for (int64_t q = 0; q < NJ; ++q) {
+        const int64_t r = ip[q];
+        if (r < lo || r >= hi) continue;
+        const float wq = wp[q];
+        const float* src = gp + (q / J) * C;
+        float* dst = a + r * C;
+        for (int64_t c = 0; c < C; ++c) dst[c] += wq * src[c];
+    }
+}
+
+}  // namespace
+
 // (N, C) sum_j w[n, j] * values[idx[n, j]] for values (M, C), idx and w (N, J).
 torch::Tensor corner_forward(torch::Tensor values, torch::Tensor idx, torch::Tensor w) {
     const int64_t N = idx.size(0), J = idx.size(1), C = values.size(1);
@@ -471,15 +511,9 @@ torch::Tensor corner_forward(torch::Tensor values, torch::Tensor idx, torch::Ten
     const float* wp = w.data_ptr<float>();
     float* o = out.data_ptr<float>();
     at::parallel_for(0, N, 512, [&](int64_t begin, int64_t end) {
-        for (int64_t n = begin; n < end; ++n) {
-            float* dst = o + n * C;
-            for (int64_t c = 0; c < C; ++c) dst[c] = 0.0f;
-            for (int64_t j = 0; j < J; ++j) {
-                const float wj = wp[n * J + j];
-                const float* src = v + ip[n * J + j] * C;
-                for (int64_t c = 0; c < C; ++c) dst[c] += wj * src[c];
-            }
-        }
+        if (C == 12) corner_sum<12>(v, ip, wp, J, C, begin, end, o);
+        else if (C == 16) corner_sum<16>(v, ip, wp, J, C, begin, end, o);
+        else corner_sum<0>(v, ip, wp, J, C, begin, end, o);
     });
     return out;
 }
@@ -496,14 +530,9 @@ torch::Tensor corner_backward(torch::Tensor g, torch::Tensor idx, torch::Tensor 
     const int64_t n_tasks = std::max<int64_t>(1, at::get_num_threads());
     at::parallel_for(0, n_tasks, 1, [&](int64_t t0, int64_t t1) {
         const int64_t lo = M * t0 / n_tasks, hi = M * t1 / n_tasks;
-        for (int64_t q = 0; q < N * J; ++q) {
-            const int64_t r = ip[q];
-            if (r < lo || r >= hi) continue;
-            const float wq = wp[q];
-            const float* src = gp + (q / J) * C;
-            float* dst = a + r * C;
-            for (int64_t c = 0; c < C; ++c) dst[c] += wq * src[c];
-        }
+        if (C == 12) corner_scatter<12>(gp, ip, wp, N * J, J, C, lo, hi, a);
+        else if (C == 16) corner_scatter<16>(gp, ip, wp, N * J, J, C, lo, hi, a);
+        else corner_scatter<0>(gp, ip, wp, N * J, J, C, lo, hi, a);
     });
     return grad;
 }
