@@ -82,11 +82,17 @@ inline void lookup_f(const std::vector<Level>& lv, const float* tab, int64_t T, 
     float w[8];
     for (size_t l = 0; l < lv.size(); ++l, dst += F) {
         const int k = corners(lv[l], u, T - 1, rows, w);
-        for (int64_t f = 0; f < F; ++f) dst[f] = 0.0f;
+        // Summed in a local array (FF > 0): dst may alias the tables for all the compiler
+        // knows, which would make every product's addition a store and a reload.
+        float local[FF > 0 ? FF : 1];
+        float* sum = FF > 0 ? local : dst;
+        for (int64_t f = 0; f < F; ++f) sum[f] = 0.0f;
         for (int j = 0; j < k; ++j) {
             const float* src = tab + ((int64_t)l * T + rows[j]) * F;
-            for (int64_t f = 0; f < F; ++f) dst[f] += w[j] * src[f];
+            for (int64_t f = 0; f < F; ++f) sum[f] += w[j] * src[f];
         }
+        if (FF > 0)
+            for (int64_t f = 0; f < F; ++f) dst[f] = sum[f];
     }
 }
 
