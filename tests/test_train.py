@@ -438,10 +438,37 @@ def test_run_resumes_under_the_other_engine(tmp_path):
 
     with pytest.raises(KeyboardInterrupt):
         train(data, tmp_path / "run", preset="tiny", device="cpu", progress=False,
-              train_config=tcfg, on_step=stop)
+              train_config=tcfg, on_step=stop, engine="torch")
     run = train(data, tmp_path / "run", preset="tiny", device="cpu", progress=False,
                 train_config=tcfg, engine="fast")
     steps = [json.loads(line)["step"] for line in (run / "log.jsonl").read_text().splitlines()]
     assert steps == [0, 1, 2, 2, 3]                     # resumed from the step-2 checkpoint
     assert json.loads((run / "config.json").read_text())["engine"] == "fast"
     assert torch.load(run / "checkpoint.pt", weights_only=True)["step"] == 4
+
+
+def test_fast_engine_falls_back_to_torch_where_it_does_not_run(tmp_path, monkeypatch, capsys):
+    """`fast` on CUDA or without its C++ extension (no compiler) trains with the torch
+    engine, says so in one line, and config.json names the engine that trained."""
+    import json
+
+    from clrender.data import make_scene
+    from clrender.ngprt import engine as engines
+    from clrender.ngprt import fused
+    from clrender.ngprt.train import train
+
+    assert engines.get("fast", torch.device("cuda")) is engines.TORCH
+    assert "runs on the CPU only" in capsys.readouterr().err
+
+    def no_compiler():
+        raise RuntimeError("Error building extension\nninja: g++: not found")
+
+    monkeypatch.setattr(fused, "build", no_compiler)
+    assert engines.get("fast", torch.device("cpu")) is engines.TORCH
+    err = capsys.readouterr().err
+    assert "did not build" in err and "g++: not found" in err and len(err.splitlines()) == 1
+    data = make_scene("bounded", tmp_path / "scene", seed=0, n_train=2, n_test=1, width=8,
+                      height=8)
+    run = train(data, tmp_path / "run", preset="tiny", iterations=1, device="cpu",
+                progress=False, engine="fast")
+    assert json.loads((run / "config.json").read_text())["engine"] == "torch"

@@ -42,8 +42,9 @@ TORCH = Engine("torch", ops.grid_lookup, ops.corner_gather, ops.aux_values, ops.
 
 
 def get(name: str, device) -> Engine:
-    """The engine ``name`` for a torch ``device``; ``fast`` on a device it does not run on
-    (CUDA, MPS) is the torch engine, with a one-line note on stderr."""
+    """The engine ``name`` for a torch ``device``; ``fast`` where it does not run (CUDA,
+    MPS; its C++ extension not built: no compiler) is the torch engine, with a one-line
+    note on stderr."""
     if name not in ENGINES:
         raise ValueError(f"unknown training engine {name!r}; engines: {', '.join(ENGINES)}")
     if name == "torch":
@@ -57,8 +58,10 @@ def get(name: str, device) -> Engine:
     try:
         fused.build()
     except Exception as e:          # the compiler's or ninja's own message, with ours
-        raise RuntimeError(f"the fast engine's C++ extension ({fused.SOURCE.name}) did not "
-                           f"build (it needs g++ and ninja; --engine torch trains without "
-                           f"them): {e}") from e
+        first = (str(e).strip().splitlines() or [type(e).__name__])[-1]
+        print(f"clrender: the fast engine's C++ extension ({fused.SOURCE.name}) did not build "
+              f"(it needs g++ and ninja): {first}; training with the torch engine",
+              file=sys.stderr)
+        return TORCH
     return Engine("fast", fused.grid_lookup, fused.corner_gather, fused.aux_values,
                   fused.coarse_corners, fused.lattice_samples)

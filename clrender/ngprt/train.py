@@ -240,7 +240,8 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
 
     Args:
         engine: ``torch`` (autograd, the reference) or ``fast`` (:mod:`clrender.ngprt.engine`;
-            recorded in ``config.json``; a checkpoint resumes under either).
+            the engine that trains is recorded in ``config.json``: ``torch`` where ``fast``
+            does not run; a checkpoint resumes under either).
         downscale: the dataset's ``images_{downscale}/`` or its images shrunk that many
             times (:func:`clrender.data.load_dataset`); recorded in ``config.json``.
         on_step: called as ``on_step(step, model, occ, gamma)`` after every iteration
@@ -259,13 +260,14 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
     tcfg = train_config or TRAIN_PRESETS[preset]
     if iterations is not None:
         tcfg = replace(tcfg, iterations=int(iterations))
+    engine = engines.get(engine, dev)            # the one that trains, recorded as such
     run = RunFolder(out, {"method": "ngprt", "model": cfg.to_dict(), "train": asdict(tcfg),
                           "data": data_path, "downscale": downscale,
-                          "preset": preset, "seed": seed, "engine": engine,
+                          "preset": preset, "seed": seed, "engine": engine.name,
                           "background": [float(v) for v in ds.background]},
                     free=("engine",))
     model = NGPRT(cfg).to(dev)
-    model.engine = engines.get(engine, dev)
+    model.engine = engine
     opt = make_optimizer(model, tcfg)
     occ, gamma, start = OccupancyGrid(cfg, dev), tcfg.gamma_init, 0
     state = run.resume(model, opt, dev)
