@@ -123,6 +123,9 @@ def build_parser() -> argparse.ArgumentParser:
                         f"at equal steps when --seeds >= 2")
     p.add_argument("--test-stride", type=whole_number("test stride"), default=1, metavar="K",
                    help=f"{train_curve.KEY}: score every K-th test view (default 1: all)")
+    p.add_argument("--points", type=whole_number("points"), default=train_curve.N_POINTS,
+                   metavar="N", help=f"{train_curve.KEY}: evaluations along a run, the first "
+                                     f"and last step included (default {train_curve.N_POINTS})")
     p.add_argument("--device", default=None, help="OpenCL device spec (see `clrender info`)")
     p.add_argument("--torch-device", default=None, help="torch device for training")
     p.add_argument("--out", type=Path, default=Path("results"))
@@ -164,8 +167,9 @@ def main(argv=None) -> int:
         args.preset = None if curve else (args.presets or [None])[0]
         if args.downscale < 1:
             raise ValueError(f"--downscale {args.downscale}: expected a whole number >= 1")
-        if not curve and (args.option is not None or args.test_stride != 1):
-            raise ValueError(f"--option and --test-stride are for {train_curve.KEY}")
+        if not curve and (args.option is not None or args.test_stride != 1
+                          or args.points != train_curve.N_POINTS):
+            raise ValueError(f"--option, --test-stride and --points are for {train_curve.KEY}")
         if (curve or args.executor != "ray") and args.address is not None:
             raise ValueError("--address is for --executor ray")
         if curve and args.executor == "ray":

@@ -18,7 +18,9 @@ training options (e.g. NGP-RT's ``engine``), each trained for the same steps and
 after the same ones; with ``--seeds N`` >= 2 each value after the first is compared with
 the first at every evaluated step, paired by seed: the mean test-PSNR difference and its
 95% t interval (:mod:`bench.seeds`). ``--downscale`` reads a dataset folder as the tables
-do, ``--test-stride K`` scores every K-th test view (the first included). Writes
+do, ``--test-stride K`` scores every K-th test view (the first included), ``--points N``
+evaluates after about N steps instead of :data:`N_POINTS` (the first evaluations, of a
+model whose occupancy grid has not pruned empty space yet, are the slowest). Writes
 ``OUT/train-curve.{csv,png}``.
 """
 from __future__ import annotations
@@ -323,6 +325,7 @@ def run(args, meta: dict) -> str:
                                         device=args.device, torch_device=args.torch_device,
                                         method=args.method,
                                         option=None if name is None else {name: value},
-                                        downscale=args.downscale, test_stride=args.test_stride)
+                                        downscale=args.downscale, test_stride=args.test_stride,
+                                        n_points=args.points)
                 text = write_curve(args.out, points, meta)
     return text + _comparison_text(compare_options(points))

@@ -177,6 +177,7 @@ def test_downscale_reaches_the_test_set_the_models_and_their_fingerprint(fake_tr
                              ("pair", "0", "0")]
     assert "downscale 4" in (tmp_path / "out" / "ndrf-teacher.md").read_text()
     assert run.main(["ndrf-teacher", "--test-stride", "2"] + common) == 2   # curves only
+    assert run.main(["ndrf-teacher", "--points", "3"] + common) == 2
 
 
 def test_fingerprint_holds_the_downscale(tmp_path):
