@@ -39,7 +39,7 @@
  * (faces, 4) int: x0, y0, x1, y1 inclusive pixel bounds (x0 > x1: covers nothing);
  * tile_count (n_tiles) int, then each tile's cursor (its first slot, advanced by
  * ndrf_raster_bin); tile_start (n_tiles + 1) int; list
- * (capacity) int; out tri (K, H, W) int (-1: miss), bary (K, H, W) float2, depth (K, H, W)
+ * (capacity) int, its slots past capacity neither written nor read (an overflowed frame); out tri (K, H, W) int (-1: miss), bary (K, H, W) float2, depth (K, H, W)
  * float (inf on a miss). ray_ab: the pixel rays' a (tiles_x * TS floats; NaN past the
  * image's last column, so nothing covers them), then b (height floats) of
  * kernels/camera.h, computed once a frame on the host with the same float32 operations
@@ -312,7 +312,7 @@ __kernel void ndrf_raster_bin(const int width, const int n_faces, __global const
  * V / (n . r), i.e. at distance V / (n . r) |(a, b, -1)| along the unit ray. */
 __kernel void ndrf_raster_tile(const int width, const int height, __global const float *ray_ab,
                                __global const float *tri_geo, __global const int *tile_start,
-                               __global const int *list,
+                               const int capacity, __global const int *list,
                                __global int *tri, __global float *bary, __global float *depth)
 {
     const int tx = (int)get_global_id(0), gy = (int)get_global_id(1);
@@ -330,7 +330,9 @@ __kernel void ndrf_raster_tile(const int width, const int height, __global const
             best_u[k][r] = best_v[k][r] = (float16)(0.0f);
             best_id[k][r] = (int16)(NONE);
         }
-    const int end = tile_start[tile + 1];
+    /* A frame that binned more pairs than the list holds reads only the list (its hits are
+     * incomplete; the host grows the list and bins the frame again). */
+    const int end = min(tile_start[tile + 1], capacity);
     for (int i = tile_start[tile]; i < end; ++i) {
         const int g = list[i];
         __global const float *geo = tri_geo + TRI_WORDS * g;

@@ -63,6 +63,14 @@ try:
     keep[-1].render(Camera.from_fov(0.8, 4096, 4096, look_at([1.6, -1.2, 0.7])))
 except ValueError as e:
     print("REFUSED", e, flush=True)
+# Last (growing the list releases a buffer): a frame overflowing its tile list reads none
+# of it past its end, and is binned again into a larger one.
+from clrender.ndrf import raster_cl
+raster_cl.INITIAL_PAIRS = 8
+keep.append(Rasteriser(model))
+hits = keep[-1].hits(views["close"])
+print("OVERFLOWED", keep[-1].binned_pairs, keep[-1].capacity, int((hits.tri >= 0).sum()),
+      flush=True)
 """
 
 
@@ -78,6 +86,10 @@ def test_ndrf_kernels_clean_under_oclgrind():
     assert all(int(r[4]) > 0 for r in raster), raster
     shaded = [line.split() for line in log.splitlines() if line.startswith("SHADED")]
     assert len(shaded) == 8, log[-4000:]
+    overflowed = [line.split() for line in log.splitlines() if line.startswith("OVERFLOWED")]
+    close = next(r for r in raster if r[2] == "close")
+    assert len(overflowed) == 1 and overflowed[0][1] == close[4] and int(close[4]) > 8, log
+    assert int(overflowed[0][2]) >= int(close[4]) and overflowed[0][3] == close[3], log
     assert {r[1] for r in shaded} == {"1", "8"}, shaded
     assert all(0.0 < float(r[4]) < 1.0 and r[5] == "True" for r in shaded), shaded
     assert "BANDED 3" in log and "RENDERED" in log

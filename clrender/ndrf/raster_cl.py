@@ -10,6 +10,12 @@ ray-triangle in camera space, docs/ndrf.md). The hit buffers stay on the device 
 :class:`clrender.ndrf.shader_cl.Shader`; :meth:`Rasteriser.hits` reads them back (tests,
 statistics). :class:`clrender.ndrf.hits.HitCaster` (Embree) is the reference.
 
+A frame makes no blocking call: the list of (triangle, tile) pairs is not sized from a
+read-back of their count; the frame bins into the list it has (the kernels neither write
+nor read past it) and reads the count back without waiting. After the frame's blocking
+read of its outputs, :meth:`Rasteriser.settle` checks the count: on overflow (rare: the
+list only grows) the list is grown and the frame binned and tiled again.
+
 A work-item covers ``TROWS`` rows of a tile: the whole tile on CPUs (one float16 a row, the
 triangle list read once), one row on GPUs (TS work-items a tile). However close the camera,
 no work-item loops over more than TS^2 pixels a triangle, and a triangle enters only the
@@ -17,8 +23,11 @@ tiles its edge functions do not exclude at the tile's corners (long slivers stay
 
 Examples:
     >>> raster = Rasteriser(model)
-    >>> bufs, ms = raster.rasterise(camera)      # device buffers "tri", "bary", "depth"
-    >>> hits = raster.hits(camera)               # Hits, as HitCaster.cast_camera
+    >>> bufs = raster.rasterise(camera)   # device buffers "tri", "bary", "depth"
+    >>> ...                               # the frame's blocking read of what uses them
+    >>> if raster.settle(): ...           # the list overflowed: hits redone, read again
+    >>> raster.frame_ms()                 # the kernels' time
+    >>> hits = raster.hits(camera)        # all of it: Hits, as HitCaster.cast_camera
 
 References: NDRF (Wan et al., CVPR 2023) §3.4 (hardware rasterisation); M. Olano and
 T. Greer, "Triangle scan conversion using 2D homogeneous coordinates", 1997; S. Laine and
@@ -153,7 +162,11 @@ class Rasteriser:
         self._setup = {"tri_geo": cl.Buffer(rt.context, mf.READ_WRITE, record * n),
                        "tri_box": cl.Buffer(rt.context, mf.READ_WRITE, 16 * n)}
         self._capacity = 0
-        self.binned_pairs = 0        # (triangle, tile) pairs the last frame binned
+        self.binned_pairs = 0        # (triangle, tile) pairs the last settled frame binned
+        self._total = np.zeros(1, I32)   # the frame's pair count, read back without waiting
+        self._total_read = None
+        self._uploads: list = []
+        self._events: list = []
         self._size = None
         self._bufs: dict = {}
         self._local: dict = {}
@@ -162,6 +175,12 @@ class Rasteriser:
     def mode(self) -> str:
         """The layout, e.g. "16x16 tiles, 16 rows a work-item"."""
         return f"{TS}x{TS} tiles, {self.rows} row{'s' if self.rows > 1 else ''} a work-item"
+
+    @property
+    def capacity(self) -> int:
+        """(triangle, tile) pairs the tile list holds: 0 before the first frame, then at
+        least :data:`INITIAL_PAIRS`, grown when a frame overflows it."""
+        return self._capacity
 
     def _frame_buffers(self, width: int, height: int) -> dict:
         if self._size != (width, height):
@@ -188,8 +207,8 @@ class Rasteriser:
             self._size, self._n_tiles = (width, height), n_tiles
         return self._bufs
 
-    def _list(self, capacity: int) -> cl.Buffer:
-        """The tile list, grown to hold at least ``capacity`` entries."""
+    def _list(self, capacity: int) -> None:
+        """Grow the tile list to hold at least ``capacity`` entries."""
         if capacity > self._capacity:
             capacity = max(capacity, 2 * self._capacity, INITIAL_PAIRS)
             check_allocation(self.runtime.device, f"raster tile list ({capacity} entries)",
@@ -197,7 +216,6 @@ class Rasteriser:
             self._list_buf = cl.Buffer(self.runtime.context, cl.mem_flags.READ_WRITE,
                                        4 * capacity)
             self._capacity = capacity
-        return self._list_buf
 
     def _run(self, name: str, shape: tuple[int, ...], *args) -> cl.Event:
         key = (name, shape)
@@ -206,42 +224,74 @@ class Rasteriser:
         local = self._local[key]
         return self._kernels[name](self.runtime.queue, padded(shape, local), local, *args)
 
-    def rasterise(self, camera) -> tuple[dict, dict]:
-        """Hits of every pixel of ``camera`` on each mesh, left on the device.
+    def rasterise(self, camera) -> dict:
+        """Hits of every pixel of ``camera`` on each mesh, enqueued and left on the device;
+        nothing waits for the device. Call :meth:`settle` after the frame's first blocking
+        read.
 
         Returns:
-            ``(buffers, ms)``: device buffers ``tri`` (K, H, W) int32 (-1 on a miss),
-            ``bary`` (K, H, W, 2) float32 Embree (u, v), ``depth`` (K, H, W) float32 along
-            the unit ray (inf on a miss); ``ms`` {"ms_raster": the kernels' time}
-            (milliseconds).
+            device buffers ``tri`` (K, H, W) int32 (-1 on a miss), ``bary`` (K, H, W, 2)
+            float32 Embree (u, v), ``depth`` (K, H, W) float32 along the unit ray (inf on
+            a miss).
         """
         b, q = self._frame_buffers(camera.width, camera.height), self.runtime.queue
         g, s = self._geo, self._setup
         w, h = np.int32(camera.width), np.int32(camera.height)
-        cl.enqueue_copy(q, b["cam"], camera.packed())
-        cl.enqueue_copy(q, b["ray_ab"], pixel_ray_ab(camera))
-        n_tiles, faces = np.int32(self._n_tiles), (max(self.n_faces, 1),)
-        setup_items = (-(-faces[0] // SETUP_LANES),)
-        events = [
+        self._list(1)
+        # pyopencl's event of a copy from the host keeps the host array alive and, when
+        # dropped, waits for the copy: kept until settle().
+        self._uploads = [cl.enqueue_copy(q, b["cam"], camera.packed(), is_blocking=False),
+                         cl.enqueue_copy(q, b["ray_ab"], pixel_ray_ab(camera),
+                                         is_blocking=False)]
+        n_tiles, faces = np.int32(self._n_tiles), max(self.n_faces, 1)
+        self._events = [
             self._run("ndrf_raster_clear", (int(n_tiles),), n_tiles, b["tile_count"]),
-            self._run("ndrf_raster_setup", setup_items, b["cam"], w, h, np.int32(self.n_faces),
-                      g["face_start"], g["faces"], g["face_ids"], g["vertices"], b["ray_ab"],
-                      s["tri_geo"], s["tri_box"], b["tile_count"]),
+            self._run("ndrf_raster_setup", (-(-faces // SETUP_LANES),), b["cam"], w, h,
+                      np.int32(self.n_faces), g["face_start"], g["faces"], g["face_ids"],
+                      g["vertices"], b["ray_ab"], s["tri_geo"], s["tri_box"], b["tile_count"]),
             self._kernels["ndrf_raster_scan"](q, (1,), (1,), n_tiles, b["tile_count"],
                                               b["tile_start"])]
-        total = np.zeros(1, I32)
-        cl.enqueue_copy(q, total, b["tile_start"], src_offset=4 * int(n_tiles))
-        self.binned_pairs = int(total[0])
-        tile_list = self._list(max(self.binned_pairs, 1))
-        tiles_x, tiles_y = -(-int(w) // TS), -(-int(h) // TS)
-        events += [
-            self._run("ndrf_raster_bin", faces, w, np.int32(self.n_faces), b["ray_ab"],
-                      s["tri_geo"], s["tri_box"], b["tile_count"], np.int32(self._capacity),
-                      tile_list),
+        self._total_read = cl.enqueue_copy(q, self._total, b["tile_start"],
+                                           src_offset=4 * int(n_tiles), is_blocking=False)
+        self._events += self._bin_and_tile()
+        return b
+
+    def _bin_and_tile(self) -> list[cl.Event]:
+        """Enqueue the bin and tile passes of the current frame into the current list."""
+        b, s, (width, height) = self._bufs, self._setup, self._size
+        w, h, capacity = np.int32(width), np.int32(height), np.int32(self._capacity)
+        tiles_x, tiles_y = -(-width // TS), -(-height // TS)
+        return [
+            self._run("ndrf_raster_bin", (max(self.n_faces, 1),), w, np.int32(self.n_faces),
+                      b["ray_ab"], s["tri_geo"], s["tri_box"], b["tile_count"], capacity,
+                      self._list_buf),
             self._run("ndrf_raster_tile", (tiles_x, tiles_y * (TS // self.rows)), w, h,
-                      b["ray_ab"], s["tri_geo"], b["tile_start"], tile_list,
+                      b["ray_ab"], s["tri_geo"], b["tile_start"], capacity, self._list_buf,
                       b["tri"], b["bary"], b["depth"])]
-        return b, {"ms_raster": sum(event_ms(e) for e in events)}
+
+    def settle(self) -> bool:
+        """Finish the last :meth:`rasterise` after a blocking read enqueued behind it (the
+        queue runs in order, so its pair count has arrived): :attr:`binned_pairs` set. If
+        the pairs overflowed the list, the list is grown and the frame binned and tiled
+        again (enqueued): returns True, and what was read from the hits must be read again.
+        """
+        self._total_read.wait()
+        self._uploads = []
+        self.binned_pairs = int(self._total[0])
+        if self.binned_pairs <= self._capacity:
+            return False
+        self._list(self.binned_pairs)
+        b = self._bufs
+        # The bin pass advanced each tile's cursor to its end: back to its start.
+        self._events.append(cl.enqueue_copy(self.runtime.queue, b["tile_count"],
+                                            b["tile_start"], byte_count=4 * self._n_tiles))
+        self._events += self._bin_and_tile()
+        return True
+
+    def frame_ms(self) -> float:
+        """The last frame's kernel time in milliseconds (both passes of a re-binned frame),
+        to be read after the frame's final read (then it waits for nothing)."""
+        return sum(event_ms(e) for e in self._events)
 
     def read_hits(self, camera) -> Hits:
         """The last :meth:`rasterise` of ``camera`` read back: arrays (K, H, W[, 2])."""
@@ -256,4 +306,5 @@ class Rasteriser:
         """First hits of the rays through every pixel centre, as
         :meth:`clrender.ndrf.hits.HitCaster.cast_camera`."""
         self.rasterise(camera)
-        return self.read_hits(camera)
+        hits = self.read_hits(camera)
+        return self.read_hits(camera) if self.settle() else hits

@@ -59,16 +59,25 @@ class Renderer:
         (host)"."""
         return f"raster ({self.rasteriser.mode})" if self.hits == "raster" else "embree (host)"
 
-    def _hits(self, camera) -> tuple:
-        """(tri buffer, bary buffer, ms_intersect, host Hits or None)."""
-        if self.hits == "raster":
-            bufs, ms = self.rasteriser.rasterise(camera)
-            return bufs["tri"], bufs["bary"], ms["ms_raster"], None
+    def _rasterised(self, camera, bg) -> tuple:
+        """(rgb, shader times, ms_intersect) from the rasteriser's hits. The frame waits for
+        the device only in the shader's read of rgb: if the rasteriser's tile list
+        overflowed, the hits are redone and the frame shaded again (rare: the list grows)."""
+        bufs = self.rasteriser.rasterise(camera)
+        rgb, times = self.shader.shade_device(camera, bufs["tri"], bufs["bary"], bg)
+        if self.rasteriser.settle():
+            rgb, times = self.shader.shade_device(camera, bufs["tri"], bufs["bary"], bg)
+        return rgb, times, self.rasteriser.frame_ms()
+
+    def _cast(self, camera, bg) -> tuple:
+        """(rgb, shader times, ms_intersect, host Hits) from Embree's hits. The reference
+        path blocks: the upload is timed with the casting by waiting for the queue."""
         start = time.perf_counter()
         hits = self.caster.cast_camera(camera)
         tri, bary = self.shader.upload_hits(camera, hits.tri, hits.bary)
         self.runtime.queue.finish()
-        return tri, bary, (time.perf_counter() - start) * 1e3, hits
+        ms_intersect = (time.perf_counter() - start) * 1e3
+        return (*self.shader.shade_device(camera, tri, bary, bg), ms_intersect, hits)
 
     def render(self, camera, background=None, stats: bool = False) -> dict:
         """Render one view.
@@ -84,9 +93,12 @@ class Renderer:
             rasteriser kernel times, or Embree wall time with the upload), ``ms_conv0``
             (with the gather), ``ms_conv1`` (kernel times) and ``ms`` their sum.
         """
-        tri, bary, ms_intersect, hits = self._hits(camera)
         bg = self.model.background if background is None else background
-        rgb, times = self.shader.shade_device(camera, tri, bary, bg)
+        if self.hits == "raster":
+            rgb, times, ms_intersect = self._rasterised(camera, bg)
+            hits = None
+        else:
+            rgb, times, ms_intersect, hits = self._cast(camera, bg)
         out = {"rgb": rgb, "ms_intersect": ms_intersect, **times}
         out["ms"] = float(sum(v for k, v in out.items() if k.startswith("ms_")))
         if stats:

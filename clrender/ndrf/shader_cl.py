@@ -198,7 +198,8 @@ class Shader:
         return np.ascontiguousarray(tri, I32), np.ascontiguousarray(bary, F32)
 
     def upload_hits(self, camera, hits_tri, hits_bary) -> tuple[cl.Buffer, cl.Buffer]:
-        """Host hits (validated) copied into this shader's frame buffers for ``camera``."""
+        """Host hits (validated) copied into this shader's frame buffers for ``camera``;
+        the copies block (the host-hit path: Embree, tests)."""
         w, h = camera.width, camera.height
         b, q = self._frame_buffers(w, h), self.runtime.queue
         tri, bary = self._check_hits(camera, hits_tri, hits_bary)
@@ -237,28 +238,33 @@ class Shader:
         Returns:
             ``(rgb, ms)``: rgb (H, W, 3) float32 in [0, 1]; ms ``{"ms_conv0", "ms_conv1"}``
             kernel times in milliseconds (OpenCL events; the gather runs inside conv0).
+            The read of rgb is the only call that waits for the device; the times are
+            read after it.
         """
         w, h = camera.width, camera.height
         b, m, q = self._frame_buffers(w, h), self._model_bufs, self.runtime.queue
         bg = self.model.background if background is None else background
         bg = [F32(c) for c in np.asarray(bg, np.float64).reshape(3)]
-        cl.enqueue_copy(q, b["cam"], camera.packed())
+        # Not waited for: its event (which keeps the host array alive, and would wait for
+        # the copy if dropped) is held until the frame's read.
+        upload = cl.enqueue_copy(q, b["cam"], camera.packed(), is_blocking=False)
         frame = self._frame_args(camera, tri_buf, bary_buf)
         seg, rows, pad = self.defines["SEG"], self.defines["ROWS"], self.defines["KSIZE"] - 1
-        ms = {"ms_conv0": 0.0, "ms_conv1": 0.0}
+        events = {"ms_conv0": [], "ms_conv1": []}
         for y in range(0, h, self._band):
             end = min(y + self._band, h)
             if y == 0 and self._band < h:   # the last frame's later bands wrote the top rows
-                ms["ms_conv0"] += event_ms(self._zero_padding(w, top_rows=True))
+                events["ms_conv0"].append(self._zero_padding(w, top_rows=True))
             band = (np.int32(y), np.int32(end))
-            ms["ms_conv0"] += event_ms(self._run(
+            events["ms_conv0"].append(self._run(
                 "ndrf_conv0", -(-w // seg), -(-(end - max(y - pad, 0)) // rows), *frame,
                 m["proj"], m["w_view"], m["b0"], *band, b["hidden"]))
-            ms["ms_conv1"] += event_ms(self._run("ndrf_conv1", w, end - y, *frame, b["hidden"],
-                                                 m["w1"], m["b1"], *bg, *band, b["rgb"]))
+            events["ms_conv1"].append(self._run("ndrf_conv1", w, end - y, *frame, b["hidden"],
+                                                m["w1"], m["b1"], *bg, *band, b["rgb"]))
         rgb = np.empty((h, w, 3), F32)
         cl.enqueue_copy(q, rgb, b["rgb"])
-        return rgb, ms
+        del upload
+        return rgb, {name: sum(map(event_ms, evs), 0.0) for name, evs in events.items()}
 
     def shade(self, camera, hits_tri, hits_bary, background=None):
         """Shade one frame from host hits: ``hits_tri`` (K, H, W) int32 (-1 for a miss),

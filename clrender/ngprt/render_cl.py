@@ -202,6 +202,7 @@ class Renderer:
                                     kernel_dir).kernel("ngprt_deferred")
         self.step = F32(model.step)
         self._local = {}
+        self._cam_upload = None
         self._upload()
 
     def _launch(self, name: str, kernel, global_size: tuple[int, ...]):
@@ -251,7 +252,9 @@ class Renderer:
         }
 
     def _outputs(self, camera) -> dict:
-        """Per-frame buffers, kept across frames of the same size (re-allocated otherwise)."""
+        """Per-frame buffers, kept across frames of the same size (re-allocated otherwise),
+        and the camera's upload enqueued: not waited for, its event (which keeps the host
+        array alive, and would wait for the copy if dropped) held until the frame's read."""
         n = camera.width * camera.height
         if getattr(self, "_frame_n", None) != n:
             ctx, mf = self.runtime.context, cl.mem_flags
@@ -264,7 +267,8 @@ class Renderer:
                            "reads": cl.Buffer(ctx, mf.WRITE_ONLY, 4 * len(READ_KINDS) * n)
                            if self.count_reads else None}
             self._frame_n = n
-        cl.enqueue_copy(self.runtime.queue, self._frame["cam"], camera.packed())
+        self._cam_upload = cl.enqueue_copy(self.runtime.queue, self._frame["cam"],
+                                           camera.packed(), is_blocking=False)
         return self._frame
 
     def _counting_kernel(self):
@@ -304,9 +308,11 @@ class Renderer:
         result = {"acc": feat[:, :7].copy(), "opacity": feat[:, 7].copy(),
                   "depth": self._read(out["depth"], (n,), F32),
                   "n_march": self._read(out["n_march"], (n,), np.int32),
-                  "n_occ": self._read(out["n_occ"], (n,), np.int32), "ms_march": event_ms(event)}
+                  "n_occ": self._read(out["n_occ"], (n,), np.int32)}
         if self.count_reads:
             result["reads"] = self._read(out["reads"], (n, len(READ_KINDS)), np.int32)
+        result["ms_march"] = event_ms(event)
+        self._cam_upload = None
         return result
 
     def render(self, camera, background=(1.0, 1.0, 1.0), stats: bool = False) -> dict:
@@ -318,7 +324,8 @@ class Renderer:
             stats: also read back the per-pixel statistics.
         Returns:
             dict with ``rgb`` (H, W, 3) float32 in [0, 1]; ``ms_march``, ``ms_deferred``:
-            kernel times in milliseconds and ``ms`` their sum. With ``stats``: ``n_march``,
+            kernel times in milliseconds (read after the outputs: the reads are the only
+            calls that wait for the device) and ``ms`` their sum. With ``stats``: ``n_march``,
             ``n_occ`` (H, W) int32 marching points and occupied samples per ray; ``depth``
             (H, W) float32 world units along the ray (0 where nothing was hit); ``opacity``
             (H, W) float32; with ``count_reads`` (the counting build's times)
@@ -334,9 +341,7 @@ class Renderer:
         ev_deferred = self._deferred(self.runtime.queue, gsize, local,
                                      out["cam"], np.int32(w), np.int32(n), out["feat"],
                                      self._bufs["deferred"], *bg, out["rgb"])
-        result = {"rgb": self._read(out["rgb"], (h, w, 3), F32),
-                  "ms_march": event_ms(ev_march), "ms_deferred": event_ms(ev_deferred)}
-        result["ms"] = result["ms_march"] + result["ms_deferred"]
+        result = {"rgb": self._read(out["rgb"], (h, w, 3), F32)}
         if stats:
             result.update(
                 n_march=self._read(out["n_march"], (h, w), np.int32),
@@ -349,4 +354,7 @@ class Renderer:
                            for i, kind in enumerate(READ_KINDS)})
             result.update(n_reads=reads.sum(axis=2, dtype=np.int32),
                           n_skip_reads=reads[..., :2].sum(axis=2, dtype=np.int32))
+        result.update(ms_march=event_ms(ev_march), ms_deferred=event_ms(ev_deferred))
+        result["ms"] = result["ms_march"] + result["ms_deferred"]
+        self._cam_upload = None
         return result
