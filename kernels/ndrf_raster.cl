@@ -39,8 +39,8 @@
  * (faces, 4) int: x0, y0, x1, y1 inclusive pixel bounds (x0 > x1: covers nothing);
  * tile_count (n_tiles) int, then each tile's cursor (its first slot, advanced by
  * ndrf_raster_bin); tile_start (n_tiles + 1) int; list
- * (capacity) int, its slots past capacity neither written nor read (an overflowed frame); out tri (K, H, W) int (-1: miss), bary (K, H, W) float2, depth (K, H, W)
- * float (inf on a miss). ray_ab: the pixel rays' a (tiles_x * TS floats; NaN past the
+ * (capacity) int, nothing past capacity written or read (an overflowed frame); out tri
+ * (K, H, W) int (-1: miss), bary (K, H, W) float2, depth (K, H, W) float (inf on a miss). ray_ab: the pixel rays' a (tiles_x * TS floats; NaN past the
  * image's last column, so nothing covers them), then b (height floats) of
  * kernels/camera.h, computed once a frame on the host with the same float32 operations
  * (clrender/ndrf/raster_cl.py).
