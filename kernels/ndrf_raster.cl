@@ -40,8 +40,9 @@
  * tile_count (n_tiles) int, then each tile's cursor (its first slot, advanced by
  * ndrf_raster_bin); tile_start (n_tiles + 1) int; list
  * (capacity) int, nothing past capacity written or read (an overflowed frame); out tri
- * (K, H, W) int (-1: miss), bary (K, H, W) float2, depth (K, H, W) float (inf on a miss). ray_ab: the pixel rays' a (tiles_x * TS floats; NaN past the
- * image's last column, so nothing covers them), then b (height floats) of
+ * (K, H, W) int (-1: miss), bary (K, H, W) float2, depth (K, H, W) float (inf on a miss).
+ * ray_ab: the pixel rays' a (tiles_x * TS floats; NaN past the image's last column, so
+ * nothing covers them), then b (height floats) of
  * kernels/camera.h, computed once a frame on the host with the same float32 operations
  * (clrender/ndrf/raster_cl.py).
  * -D defines (clrender/ndrf/raster_cl.py): K, TRI_WORDS (a triangle record's words: 16),
