@@ -20,8 +20,8 @@ DEFAULT_PRESET = "cpu"
 TRAIN_OPTIONS = {
     "variant": Option(str, "separate-v", "feature aggregation (Table 3)", choices=VARIANTS),
     "L": Option(int, 2, "fine hash levels L", flag="--levels"),
-    "engine": Option(str, "torch", "training engine: torch (autograd, the reference) or fast "
-                     "(fused C++ grid lookups, CPU)", choices=ENGINES),
+    "engine": Option(str, "fast", "training engine: fast (fused C++ stages, CPU; elsewhere "
+                     "the torch engine) or torch (autograd, the reference)", choices=ENGINES),
 }
 TEACHER = None
 ABLATIONS = Path(__file__).resolve().parent / "ablations"
@@ -64,7 +64,7 @@ class Renderer(_CLRenderer):
 def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
           iterations: int | None = None, torch_device=None, progress: bool = True,
           on_step=None, downscale: int = 1, variant: str = "separate-v", L: int = 2,
-          engine: str = "torch"):
+          engine: str = "fast"):
     """Train an NGP-RT run (:func:`clrender.ngprt.train.train`); ``on_step(step, bake)`` as
     :data:`clrender.methods.StepHook` (``bake()``: the training state baked in memory)."""
     from .train import train as train_ngprt
@@ -119,7 +119,7 @@ def check_model_options(options: dict) -> None:
 
 
 def model_spec(preset: str, variant: str = "separate-v", L: int = 2,
-               engine: str = "torch") -> dict:
+               engine: str = "fast") -> dict:
     """Everything but data and seed that determines a trained model (the cache key, which
     names the training engine)."""
     from dataclasses import asdict

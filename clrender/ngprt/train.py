@@ -232,14 +232,14 @@ def load_run(run_dir, device=None):
 def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 2,
           iterations: int | None = None, seed: int = 0, device=None,
           train_config: TrainConfig | None = None, progress: bool = True,
-          on_step=None, downscale: int = 1, engine: str = "torch") -> Path:
+          on_step=None, downscale: int = 1, engine: str = "fast") -> Path:
     """Train an NGP-RT model on the dataset folder ``data`` (or a loaded Dataset) into the
     run folder ``out`` (:class:`clrender.runs.RunFolder`).
 
     An existing checkpoint in ``out`` with the same config is resumed.
 
     Args:
-        engine: ``torch`` (autograd, the reference) or ``fast`` (:mod:`clrender.ngprt.engine`;
+        engine: ``fast`` or ``torch`` (autograd, the reference; :mod:`clrender.ngprt.engine`;
             the engine that trains is recorded in ``config.json``: ``torch`` where ``fast``
             does not run; a checkpoint resumes under either).
         downscale: the dataset's ``images_{downscale}/`` or its images shrunk that many
