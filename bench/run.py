@@ -126,6 +126,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--points", type=whole_number("points"), default=train_curve.N_POINTS,
                    metavar="N", help=f"{train_curve.KEY}: evaluations along a run, the first "
                                      f"and last step included (default {train_curve.N_POINTS})")
+    p.add_argument("--iterations", type=whole_number("iterations"), default=None, metavar="N",
+                   help=f"{train_curve.KEY}: train N steps instead of the preset's (a budget of "
+                        f"equal minutes for presets or engines of different step times)")
     p.add_argument("--device", default=None, help="OpenCL device spec (see `clrender info`)")
     p.add_argument("--torch-device", default=None, help="torch device for training")
     p.add_argument("--out", type=Path, default=Path("results"))
@@ -168,8 +171,9 @@ def main(argv=None) -> int:
         if args.downscale < 1:
             raise ValueError(f"--downscale {args.downscale}: expected a whole number >= 1")
         if not curve and (args.option is not None or args.test_stride != 1
-                          or args.points != train_curve.N_POINTS):
-            raise ValueError(f"--option, --test-stride and --points are for {train_curve.KEY}")
+                          or args.points != train_curve.N_POINTS or args.iterations is not None):
+            raise ValueError(f"--option, --test-stride, --points and --iterations are for "
+                             f"{train_curve.KEY}")
         if (curve or args.executor != "ray") and args.address is not None:
             raise ValueError("--address is for --executor ray")
         if curve and args.executor == "ray":

@@ -20,7 +20,9 @@ the first at every evaluated step, paired by seed: the mean test-PSNR difference
 95% t interval (:mod:`bench.seeds`). ``--downscale`` reads a dataset folder as the tables
 do, ``--test-stride K`` scores every K-th test view (the first included), ``--points N``
 evaluates after about N steps instead of :data:`N_POINTS` (the first evaluations, of a
-model whose occupancy grid has not pruned empty space yet, are the slowest). Writes
+model whose occupancy grid has not pruned empty space yet, are the slowest);
+``--iterations N`` trains N steps instead of the preset's (curves of equal minutes for
+presets or engines whose steps take different times). Writes
 ``OUT/train-curve.{csv,png}``.
 """
 from __future__ import annotations
@@ -326,6 +328,6 @@ def run(args, meta: dict) -> str:
                                         method=args.method,
                                         option=None if name is None else {name: value},
                                         downscale=args.downscale, test_stride=args.test_stride,
-                                        n_points=args.points)
+                                        n_points=args.points, iterations=args.iterations)
                 text = write_curve(args.out, points, meta)
     return text + _comparison_text(compare_options(points))

@@ -178,6 +178,7 @@ def test_downscale_reaches_the_test_set_the_models_and_their_fingerprint(fake_tr
     assert "downscale 4" in (tmp_path / "out" / "ndrf-teacher.md").read_text()
     assert run.main(["ndrf-teacher", "--test-stride", "2"] + common) == 2   # curves only
     assert run.main(["ndrf-teacher", "--points", "3"] + common) == 2
+    assert run.main(["ndrf-teacher", "--iterations", "3"] + common) == 2
 
 
 def test_fingerprint_holds_the_downscale(tmp_path):

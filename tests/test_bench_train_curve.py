@@ -55,13 +55,13 @@ def test_run_writes_every_preset_to_one_csv_and_png(tmp_path, monkeypatch, capsy
 def test_option_values_seeds_downscale_and_stride_reach_every_curve(tmp_path, monkeypatch,
                                                                     capsys):
     """`--option engine=torch,fast --seeds 2`: a curve per value and seed, each given the
-    downscale, the test stride and the number of points, and each value after the first compared with the first
+    downscale, the test stride, the number of points and the iterations, and each value after the first compared with the first
     at every step, paired by seed."""
     calls = []
 
     def fake_curve(root, data, fingerprint, preset, seed=0, option=None, downscale=1,
-                   test_stride=1, n_points=None, **kwargs):
-        calls.append((preset, option, seed, downscale, test_stride, n_points))
+                   test_stride=1, n_points=None, iterations=None, **kwargs):
+        calls.append((preset, option, seed, downscale, test_stride, n_points, iterations))
         fast = option == {"engine": "fast"}
         return [{"method": "ngprt", "preset": preset, "option": f"engine={option['engine']}",
                  "seed": seed, "step": s, "train_seconds": 1.0 + s, "eval_seconds": 1.0,
@@ -74,9 +74,9 @@ def test_option_values_seeds_downscale_and_stride_reach_every_curve(tmp_path, mo
     out = tmp_path / "out"
     assert run.main(["train-curve", "--preset", "tiny", "--option", "engine=torch,fast",
                      "--seeds", "2", "--downscale", "2", "--test-stride", "3", "--points", "4",
-                     "--scene", str(tmp_path / "scene"), "--cache", str(tmp_path / "cache"),
+                     "--iterations", "50", "--scene", str(tmp_path / "scene"), "--cache", str(tmp_path / "cache"),
                      "--out", str(out)]) == 0
-    assert calls == [("tiny", {"engine": e}, s, 2, 3, 4) for e in ("torch", "fast")
+    assert calls == [("tiny", {"engine": e}, s, 2, 3, 4, 50) for e in ("torch", "fast")
                      for s in (0, 1)]
     rows = list(csv.DictReader((out / "train-curve.csv").open()))
     assert [(r["option"], r["seed"]) for r in rows][::2] == \
