@@ -32,7 +32,7 @@ from tqdm import tqdm
 from bench import cache, provenance
 
 # CPU cores a training task asks for, per preset; torch runs that many threads.
-TASK_CPUS = {"tiny": 1, "cpu": 2, "paper": 8}
+TASK_CPUS = {"tiny": 1, "cpu": 2, "cpu-long": 2, "paper": 8}
 # Retries of a task whose worker died (Ray's max_retries); its own exceptions are not retried.
 MAX_RETRIES = 2
 REPO = Path(__file__).resolve().parent.parent

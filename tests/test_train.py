@@ -217,6 +217,26 @@ def test_tune_gamma_and_schedule():
     assert schedule(99_999, tc)[0] < 1e-6
 
 
+def test_presets_change_sizes_and_counts_never_the_method():
+    from dataclasses import asdict
+
+    from clrender.ngprt.config import PRESETS
+    from clrender.ngprt.train import TRAIN_PRESETS
+
+    assert set(PRESETS) == set(TRAIN_PRESETS)
+    sizes = {"L_C", "step_res", "log2_T", "G_res", "aux_levels", "aux_log2_T"}
+    counts = {"iterations", "max_rays", "target_samples", "occ_every", "occ_warmup",
+              "occ_decay", "occ_fraction", "checkpoint_every", "log_every"}
+    for name in PRESETS:
+        model = {k for k, v in asdict(PRESETS[name]).items() if v != asdict(PRESETS["paper"])[k]}
+        train = {k for k, v in asdict(TRAIN_PRESETS[name]).items()
+                 if v != asdict(TRAIN_PRESETS["paper"])[k]}
+        assert model <= sizes and train <= counts, name
+    # The quality preset is the cpu model with larger fine tables, trained longer.
+    assert PRESETS["cpu-long"].log2_T > PRESETS["cpu"].log2_T
+    assert TRAIN_PRESETS["cpu-long"].iterations > TRAIN_PRESETS["cpu"].iterations
+
+
 def test_fused_adam_follows_the_default_adam():
     """make_optimizer's fused CPU Adam against torch's default Adam on the same gradients:
     parameters within 1e-6 after 20 steps (float32 rounding of a reordered update; the
