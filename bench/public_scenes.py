@@ -22,7 +22,8 @@
 Licences: Mip-NeRF 360 and NeRF-synthetic are research datasets released by their
 authors; these repositories are third-party copies (shouxieai/nerf says MIT for its code,
 the others state none), so use the folders for research measurements only, and cite the
-original datasets. Nothing in the tests depends on them.
+original datasets. Nothing in the tests depends on them. Sources, conditions and the
+results on them: docs/real-scenes.md.
 
 Files are copied, never linked; the folder is built beside ``out`` and renamed into place,
 so a failure leaves no half-written dataset.
