@@ -243,7 +243,7 @@ PRESETS: dict[str, ModelConfig] = {
     # G_res = L_C / 2, as the paper's.
     "cpu": ModelConfig(L_C=128, step_res=256, log2_T=18, G_res=64, aux_levels=4,
                        aux_log2_T=17),
-    # Real captures, about 10 minutes of training on 2 CPU cores (fast engine): the cpu
+    # Real captures, 10-14 minutes of training on 2 CPU cores (fast engine): the cpu
     # model with 2^19-entry fine tables. Chosen on the NeRF-synthetic lego at 800x800 at
     # equal minutes (seed 0, every 3rd of its 13 held-out views; docs/performance.md,
     # "Presets"): cpu sizes 28.85 dB after 3.3 minutes, 2^19 tables 29.16 dB after 3.9,

@@ -87,8 +87,8 @@ TRAIN_PRESETS: dict[str, TrainConfig] = {
     "cpu": TrainConfig(iterations=1000, max_rays=4096, target_samples=1 << 15, occ_every=64,
                        occ_warmup=128, occ_decay=0.36, occ_fraction=0.25, checkpoint_every=250,
                        log_every=25),
-    # The cpu counts for about 10 minutes of fast-engine steps (~66 ms on the lego at
-    # 800x800 with 2^19 tables, measured).
+    # The cpu counts for 10-14 minutes of fast-engine steps (measured: 66 ms a step on the
+    # lego at 800x800 with 2^19 tables, 91 ms on the unbounded bonsai at 400x266).
     "cpu-long": TrainConfig(iterations=9000, max_rays=4096, target_samples=1 << 15,
                             occ_every=64, occ_warmup=128, occ_decay=0.36, occ_fraction=0.25,
                             checkpoint_every=1000, log_every=50),
