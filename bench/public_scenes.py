@@ -39,9 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
+from clrender.data.llff import split_indices
+
 BONSAI_FRAMES = 292
 LEGO_FRAMES = 100
-TEST_EVERY = 8
 
 
 def bonsai_images(repo: Path) -> list[Path]:
@@ -91,8 +92,8 @@ def assemble_lego(repo: Path, folder: Path) -> None:
     for frame in frames:
         name = Path(frame["file_path"]).name + ".png"
         shutil.copyfile(root / "train" / name, folder / "train" / name)
-    for split, keep in (("train", lambda i: i % TEST_EVERY), ("test", lambda i: not i % TEST_EVERY)):
-        chosen = [f for i, f in enumerate(frames) if keep(i)]
+    for split in ("train", "test"):   # held out as the LLFF loader does: every 8th
+        chosen = [frames[i] for i in split_indices(len(frames), split)]
         (folder / f"transforms_{split}.json").write_text(
             json.dumps({**meta, "frames": chosen}, indent=1))
 

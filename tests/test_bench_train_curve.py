@@ -55,8 +55,8 @@ def test_run_writes_every_preset_to_one_csv_and_png(tmp_path, monkeypatch, capsy
 def test_option_values_seeds_downscale_and_stride_reach_every_curve(tmp_path, monkeypatch,
                                                                     capsys):
     """`--option engine=torch,fast --seeds 2`: a curve per value and seed, each given the
-    downscale, the test stride, the number of points and the iterations, and each value after the first compared with the first
-    at every step, paired by seed."""
+    downscale, the test stride, the number of points and the iterations, and each value
+    after the first compared with the first at every step, paired by seed."""
     calls = []
 
     def fake_curve(root, data, fingerprint, preset, seed=0, option=None, downscale=1,
@@ -74,7 +74,8 @@ def test_option_values_seeds_downscale_and_stride_reach_every_curve(tmp_path, mo
     out = tmp_path / "out"
     assert run.main(["train-curve", "--preset", "tiny", "--option", "engine=torch,fast",
                      "--seeds", "2", "--downscale", "2", "--test-stride", "3", "--points", "4",
-                     "--iterations", "50", "--scene", str(tmp_path / "scene"), "--cache", str(tmp_path / "cache"),
+                     "--iterations", "50", "--scene", str(tmp_path / "scene"),
+                     "--cache", str(tmp_path / "cache"),
                      "--out", str(out)]) == 0
     assert calls == [("tiny", {"engine": e}, s, 2, 3, 4, 50) for e in ("torch", "fast")
                      for s in (0, 1)]

@@ -75,23 +75,22 @@ class TrainConfig:
     log_every: int = 50
 
 
+# The cpu preset. Short runs visit each cell far fewer times than 100k iterations would, so the
+# occupancy EMA decays faster to prune empty space within the run. An update of the
+# cpu preset's 128^3 grid costs ~2 s (its 129^3 coarse corners, a quarter of the
+# cells at random and as many occupied ones), so it runs every 64 steps; 0.36 = 0.6^2
+# keeps the decay per step of the former update every 32.
+# 2^15 samples a batch: the cpu model's step (step_res = 2 L_C) puts ~30 on a bounded
+# ray, so a batch holds ~2700 rays (2^14 held ~1350 and lost 0.5 dB, measured).
+_CPU = TrainConfig(iterations=1000, max_rays=4096, target_samples=1 << 15, occ_every=64,
+                   occ_warmup=128, occ_decay=0.36, occ_fraction=0.25, checkpoint_every=250,
+                   log_every=25)
 TRAIN_PRESETS: dict[str, TrainConfig] = {
     "paper": TrainConfig(),
-    # Short runs visit each cell far fewer times than 100k iterations would, so the
-    # occupancy EMA decays faster to prune empty space within the run. An update of the
-    # cpu preset's 128^3 grid costs ~2 s (its 129^3 coarse corners, a quarter of the
-    # cells at random and as many occupied ones), so it runs every 64 steps; 0.36 = 0.6^2
-    # keeps the decay per step of the former update every 32.
-    # 2^15 samples a batch: the cpu model's step (step_res = 2 L_C) puts ~30 on a bounded
-    # ray, so a batch holds ~2700 rays (2^14 held ~1350 and lost 0.5 dB, measured).
-    "cpu": TrainConfig(iterations=1000, max_rays=4096, target_samples=1 << 15, occ_every=64,
-                       occ_warmup=128, occ_decay=0.36, occ_fraction=0.25, checkpoint_every=250,
-                       log_every=25),
+    "cpu": _CPU,
     # The cpu counts for 10-14 minutes of fast-engine steps (measured: 66 ms a step on the
     # lego at 800x800 with 2^19 tables, 91 ms on the unbounded bonsai at 400x266).
-    "cpu-long": TrainConfig(iterations=9000, max_rays=4096, target_samples=1 << 15,
-                            occ_every=64, occ_warmup=128, occ_decay=0.36, occ_fraction=0.25,
-                            checkpoint_every=1000, log_every=50),
+    "cpu-long": replace(_CPU, iterations=9000, checkpoint_every=1000, log_every=50),
     "tiny": TrainConfig(iterations=300, max_rays=1024, target_samples=1 << 13, occ_every=16,
                         occ_warmup=32, occ_decay=0.6, occ_fraction=0.5, checkpoint_every=300,
                         log_every=10),
