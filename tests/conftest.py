@@ -31,9 +31,15 @@ def pytest_configure(config):
 
 # The CPU OpenCL implementations the kernel tests run on (cl_platform): PoCL (Debian's or
 # pip's, the [pocl] extra) and Intel's CPU runtime from pip (clrender/icd.py registers it).
+# More by $CLRENDER_TEST_PLATFORMS, "key=platform name" pairs separated by commas (a GPU's
+# driver, e.g. "nvidia=NVIDIA CUDA"): each runs the same tests, skipped where absent.
 CL_PLATFORMS = {"pocl": "Portable Computing Language", "intel": "Intel(R) OpenCL"}
 _INSTALL = {"intel": "pip install intel-opencl-rt intel-cmplr-lib-rt tbb",
             "pocl": "apt install pocl-opencl-icd, or pip install pocl-binary-distribution"}
+for _pair in filter(None, os.environ.get("CLRENDER_TEST_PLATFORMS", "").split(",")):
+    _key, _, _name = _pair.partition("=")
+    CL_PLATFORMS[_key.strip()] = _name.strip()
+    _INSTALL.setdefault(_key.strip(), "its vendor's OpenCL driver")
 
 
 @pytest.fixture(params=list(CL_PLATFORMS))
