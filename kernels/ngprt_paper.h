@@ -52,17 +52,22 @@ inline vint v_paper_g_step(const v_rays *r, const v_march_point *p, vint g)
 /* Eq. 9, unbounded, in contracted arc length (marches.paper_g_step_unbounded):
  * k + floor(4 g / G_RES / s) lattice steps, at least k + 1, at most the first lattice
  * point of the next piece of the lane's lattice (across a piece's end the contraction may
- * jump, and arc length bounds no distance). */
+ * jump, and arc length bounds no distance); k + 1 from the first lattice point of a piece
+ * after the ray's start (it may lie on the jump itself, off its piece's segment). */
 inline vint v_paper_g_step(const v_rays *r, const v_march_point *p, vint g)
 {
     const vint n = v_floor_i(4.0f * VF(g) / (float)G_RES / r->s);
     const vfloat sigma = v_lattice_g(r, r->k);
-    vfloat end = r->lt->cum[1];
-    for (int q = 1; q < LATTICE_BREAKS - 1; ++q)
-        end = select(end, r->lt->cum[q + 1], VMASK(r->lt->cum[q] <= sigma));
+    vfloat start = r->lt->cum[0], end = r->lt->cum[1];
+    for (int q = 1; q < LATTICE_BREAKS - 1; ++q) {
+        const vint in = VMASK(r->lt->cum[q] <= sigma);
+        start = select(start, r->lt->cum[q], in);
+        end = select(end, r->lt->cum[q + 1], in);
+    }
     vint k_p = v_ceil_i(end / r->s);
     k_p = select(k_p, k_p - 1, VMASK(v_lattice_g(r, k_p - 1) >= end));
-    return max(r->k + 1, min(r->k + n, k_p));
+    const vint first = VMASK(r->lt->cum[1] <= sigma) & VMASK(v_lattice_g(r, r->k - 1) < start);
+    return select(max(r->k + 1, min(r->k + n, k_p)), r->k + 1, first);
 }
 #endif
 #endif

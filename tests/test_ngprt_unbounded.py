@@ -147,6 +147,32 @@ def test_every_occupied_lattice_point_is_taken(box_model, use_G, march):
         f"sampled {got['n_occ'][missed[0]]}")
 
 
+def test_paper_g_step_takes_one_point_from_a_pieces_first(box_model):
+    # The contraction jumps where a ray crosses |x_a| = |x_b| outside the cube (and at the
+    # tie itself scales both axes), so a piece's first lattice point may lie off its
+    # piece's segment: G's ball about it bounds nothing ahead (bonsai, before this rule:
+    # one ray in 4 views skipped 3 occupied points). From it the step is k + 1; from the
+    # next point G's full step (clamped to the piece) applies.
+    from clrender.ngprt.marches import paper_g_step_unbounded
+
+    cfg, s = box_model.config, F32(box_model.step)
+    o = np.array([[0.3, -0.2, 0.1]], F32)
+    d = _unit(np.array([[0.9, 0.8, 0.1]]))
+    t_start, t_end, _ = ray_range(cfg, o, d)
+    table = lattice_table(o, d, t_start, t_end)
+    cum = table[1][0]
+    j = next(q for q in range(1, len(cum) - 1) if cum[q + 1] - cum[q] > 8 * s)
+    first = int(np.ceil(cum[j] / s))
+    first -= int(F32(first - 1) * s >= cum[j])
+    g = np.array([255])
+    for k, want in ((first, first + 1), (first + 1, None)):
+        step = int(paper_g_step_unbounded(cfg, np.array([k]), g, s, table)[0])
+        if want is not None:
+            assert step == want
+        else:
+            assert k + 1 < step <= int(np.ceil(cum[j + 1] / s))
+
+
 @pytest.mark.parametrize("use_G", [True, False])
 def test_closed_form_takes_the_walks_marching_points(box_model, use_G, monkeypatch):
     o, d = make_rays(box_model, seed=2 + int(use_G))
@@ -167,12 +193,12 @@ def test_kernel_takes_the_references_points(box_model, cl_platform):
     from clrender.ngprt.render_cl import Renderer
 
     total = 0
-    for use_G in (True, False):
-        renderer = Renderer(box_model, use_G=use_G, exact=True)
+    for use_G, march in ((True, "ours"), (False, "ours"), (True, "paper")):
+        renderer = Renderer(box_model, use_G=use_G, exact=True, march=march)
         for cam in _cameras():
             o, d = (a.reshape(-1, 3) for a in generate_rays(cam))
             out = renderer.march(cam)
-            ref = march_reference(box_model, o, d, use_G=use_G)
+            ref = march_reference(box_model, o, d, use_G=use_G, march=march)
             np.testing.assert_array_equal(out["n_occ"], ref["n_occ"])
             np.testing.assert_array_equal(out["n_march"], ref["n_march"])
             np.testing.assert_array_equal(ref["n_occ"], occupied_lattice_points(box_model, o, d))

@@ -87,12 +87,16 @@ def paper_g_step_unbounded(config, k, g, s, table) -> np.ndarray:
     (``table``: the rays' ``space.lattice_table`` rows). Within a piece the contracted path
     is straight, so arc length is distance and every point passed lies in G's empty ball;
     across a piece's end the contraction may jump (the planes ``|x_a| = |x_b|``), where
-    arc length bounds no distance."""
+    arc length bounds no distance. The first lattice point of a piece (after the ray's
+    start) steps to ``k + 1``: it may lie on the jump itself (at a tie the contraction
+    scales both axes), off its piece's segment, so its ball says nothing about it."""
     cum = table[1]
     sigma = k.astype(F32) * s
     n = np.floor(F32(4.0) * g.astype(F32) / F32(config.G_res) / s).astype(np.int64)
     j = (cum[:, 1:cum.shape[1] - 1] <= sigma[:, None]).sum(axis=1)
-    end = cum[np.arange(len(k)), j + 1]
+    rows = np.arange(len(k))
+    end = cum[rows, j + 1]
     k_p = np.ceil(end / s).astype(np.int64)
     k_p = np.where((k_p - 1).astype(F32) * s >= end, k_p - 1, k_p)
-    return np.maximum(k + 1, np.minimum(k + n, k_p))
+    first = (j > 0) & ((k - 1).astype(F32) * s < cum[rows, j])
+    return np.where(first, k + 1, np.maximum(k + 1, np.minimum(k + n, k_p)))
