@@ -21,7 +21,6 @@ import hashlib
 import json
 import os
 import shutil
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,7 +30,7 @@ from filelock import FileLock
 from bench import provenance
 from bench.fingerprint import code_fingerprint
 from clrender import methods
-from clrender.atomic import remove_leftovers, write_atomic
+from clrender.atomic import atomic_folder, remove_leftovers, write_atomic
 
 BUILTIN_SCENES = {"builtin-bounded": "bounded", "builtin-unbounded": "unbounded"}
 
@@ -70,17 +69,14 @@ def lock(path: Path) -> FileLock:
 
 
 def _make_scene(kind: str, path: Path) -> None:
-    """Generate a built-in scene into ``path`` (its lock held): in a temporary folder, then
-    renamed, after clearing the folders of this scene's generators killed mid-way."""
+    """Generate a built-in scene into ``path`` (its lock held), atomically, after clearing
+    the temporary folders of this scene's generators killed mid-way."""
     from clrender.data import make_scene
 
-    prefix = f".tmp-scene-{path.name}-"
-    for stale in path.parent.glob(f"{prefix}*"):
+    for stale in path.parent.glob(f".{path.name}.*"):
         shutil.rmtree(stale, ignore_errors=True)
-    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=prefix))
-    make_scene(kind, tmp, seed=0)
     shutil.rmtree(path, ignore_errors=True)
-    os.replace(tmp, path)
+    atomic_folder(path, lambda tmp: make_scene(kind, tmp, seed=0))
 
 
 def _is_current(path: Path, kind: str) -> bool:

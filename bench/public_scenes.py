@@ -34,11 +34,11 @@ import argparse
 import json
 import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from clrender.atomic import atomic_folder
 from clrender.data.llff import split_indices
 
 BONSAI_FRAMES = 292
@@ -102,15 +102,7 @@ def build(out: Path, write) -> Path:
     """Run ``write(folder)`` on a temporary folder beside ``out``, then rename it to ``out``."""
     if out.exists():
         raise ValueError(f"{out}: already exists; remove it or choose another folder")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
-        write(tmp)
-        tmp.rename(out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return out
+    return atomic_folder(out, write)
 
 
 def main(argv=None) -> int:

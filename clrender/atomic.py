@@ -1,9 +1,10 @@
-"""Write files so that readers never see them half-written: a temporary file in the same
-folder, then a rename over the target (``os.replace`` is atomic on one file system)."""
+"""Write files and folders so that readers never see them half-written: a temporary one in
+the same folder, then a rename onto the target (atomic on one file system)."""
 from __future__ import annotations
 
 import os
 import re
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Callable
@@ -33,6 +34,25 @@ def atomic_write(path, write: Callable[[Path], None]) -> Path:
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        raise
+    return path
+
+
+def atomic_folder(path, write: Callable[[Path], None]) -> Path:
+    """Call ``write(tmp)`` on a temporary folder beside ``path`` (``.<name>.<random>``),
+    then rename it to ``path``, which must not exist or be empty (no rename replaces a
+    folder with content: remove it first, under a lock where others may read it). The
+    temporary folder is removed if ``write`` or the rename fails (OSError where ``path``
+    appeared meanwhile). Returns ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    try:
+        os.chmod(tmp, 0o755)
+        write(tmp)
+        os.rename(tmp, path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
         raise
     return path
 

@@ -23,11 +23,12 @@ from __future__ import annotations
 
 import hashlib
 import os
-import shutil
 import site
 import sys
 import tempfile
 from pathlib import Path
+
+from .atomic import atomic_folder
 
 SYSTEM_VENDORS = Path("/etc/OpenCL/vendors")
 # pip package -> (its runtime library, in the environment's or the user base's lib/; the
@@ -74,24 +75,21 @@ def _cache_root() -> Path:
 def _write_folder(files: dict[str, str]) -> Path:
     """A folder holding ``files`` ({name: text}), named by their hash and written once,
     atomically (a temporary folder renamed into place)."""
+    def write(folder: Path) -> None:
+        for name, text in files.items():
+            (folder / name).write_text(text)
+
     digest = hashlib.sha256(repr(sorted(files.items())).encode()).hexdigest()[:16]
     for root in (_cache_root(), Path(tempfile.gettempdir()) / f"clrender-{os.getuid()}"):
         final = root / f"opencl-vendors-{digest}"
         if final.is_dir():
             return final
         try:
-            root.mkdir(parents=True, exist_ok=True)
-            tmp = Path(tempfile.mkdtemp(prefix=".vendors-", dir=root))
-            for name, text in files.items():
-                (tmp / name).write_text(text)
-            try:
-                tmp.rename(final)
-            except OSError:  # another process renamed its copy first
-                shutil.rmtree(tmp, ignore_errors=True)
-            if final.is_dir():
-                return final
-        except OSError:
-            continue
+            atomic_folder(final, write)
+        except OSError:  # unwritable, or another process renamed its copy first
+            pass
+        if final.is_dir():
+            return final
     raise OSError(f"cannot write an OpenCL vendors folder under {_cache_root()} or "
                   f"{tempfile.gettempdir()}")
 

@@ -24,7 +24,7 @@ import pytest
 from filelock import Timeout
 
 from bench import cache, cluster, run
-from clrender.atomic import _TEMPORARY, remove_leftovers
+from clrender.atomic import _TEMPORARY, atomic_folder, remove_leftovers
 from clrender.data import make_scene
 from deps import require
 
@@ -247,3 +247,20 @@ def test_leftovers_of_a_killed_atomic_write_are_removed(tmp_path):
     assert len(left) == 1 and not target.exists()
     assert remove_leftovers(tmp_path) == left
     assert sorted(p.name for p in tmp_path.iterdir()) == [".lock", "model.npz"]
+
+
+def test_atomic_folder_appears_whole_or_not_at_all(tmp_path):
+    target = tmp_path / "scene"
+
+    def fail(folder):
+        (folder / "a").write_text("x")
+        raise RuntimeError("mid-way")
+
+    with pytest.raises(RuntimeError, match="mid-way"):
+        atomic_folder(target, fail)
+    assert list(tmp_path.iterdir()) == []
+    atomic_folder(target, lambda folder: (folder / "a").write_text("x"))
+    assert (target / "a").read_text() == "x" and [p.name for p in tmp_path.iterdir()] == ["scene"]
+    with pytest.raises(OSError):     # a folder with content is never replaced
+        atomic_folder(target, lambda folder: (folder / "b").write_text("y"))
+    assert [p.name for p in tmp_path.iterdir()] == ["scene"] and not (target / "b").exists()
