@@ -72,23 +72,74 @@ inline int corners(const Level& lv, const float* u, int64_t mask, int64_t* rows,
     return 8;
 }
 
-// The (n_levels * F) features of the sample at u into dst; FF > 0: F known at compile
-// time (4 and 8, the presets' feature counts).
+// Samples between a row's prefetch and its read.
+constexpr int64_t AHEAD = 16;
+
+// The corners of levels [l0, l1) of samples [begin, end), each computed once, AHEAD samples
+// before they are read: the rows prefetched then (the tables are larger than the caches
+// and their rows random; RW 1 for rows about to be written), kept in a ring of AHEAD + 1
+// samples until read.
+template <int RW>
+class CornerRing {
+  public:
+    CornerRing(const std::vector<Level>& lv, int64_t l0, int64_t l1, const float* tab,
+               int64_t T, int64_t F, const float* u, int64_t begin, int64_t end)
+        : lv_(lv), l0_(l0), nl_(l1 - l0), T_(T), F_(F), tab_(tab), u_(u), end_(end),
+          next_(begin), k_(SLOTS * nl_), rows_(SLOTS * nl_ * 8), w_(SLOTS * nl_ * 8) {
+        while (next_ < std::min(begin + AHEAD, end)) compute(next_++);
+    }
+
+    // The slot of sample n (n = begin, begin + 1, ... in turn); computes sample n + AHEAD.
+    int64_t next(int64_t n) {
+        if (next_ < end_) compute(next_++);
+        return n % SLOTS;
+    }
+    // Slot s's corner count, rows and weights at its i-th level (level l0 + i).
+    int k(int64_t s, int64_t i) const { return k_[s * nl_ + i]; }
+    const int64_t* rows(int64_t s, int64_t i) const { return &rows_[(s * nl_ + i) * 8]; }
+    const float* w(int64_t s, int64_t i) const { return &w_[(s * nl_ + i) * 8]; }
+
+  private:
+    static constexpr int64_t SLOTS = AHEAD + 1;
+
+    void compute(int64_t m) {
+        const int64_t s = m % SLOTS;
+        for (int64_t i = 0; i < nl_; ++i) {
+            int64_t* r = &rows_[(s * nl_ + i) * 8];
+            const int k = k_[s * nl_ + i] =
+                corners(lv_[l0_ + i], u_ + 3 * m, T_ - 1, r, &w_[(s * nl_ + i) * 8]);
+            const float* base = tab_ + (l0_ + i) * T_ * F_;
+            for (int j = 0; j < k; ++j) __builtin_prefetch(base + r[j] * F_, RW);
+        }
+    }
+
+    const std::vector<Level>& lv_;
+    const int64_t l0_, nl_, T_, F_;
+    const float *tab_, *u_;
+    const int64_t end_;
+    int64_t next_;                     // the next sample to compute
+    std::vector<int> k_;               // (SLOTS, nl)
+    std::vector<int64_t> rows_;        // (SLOTS, nl, 8)
+    std::vector<float> w_;             // (SLOTS, nl, 8)
+};
+
+// The (n_levels * F) features of ring slot s (every level) into dst; FF > 0: F known at
+// compile time (4 and 8, the presets' feature counts).
 template <int FF>
-inline void lookup_f(const std::vector<Level>& lv, const float* tab, int64_t T, int64_t Fr,
-                     const float* u, float* dst) {
+inline void lookup_f(const CornerRing<0>& ring, int64_t s, int64_t n_lev, const float* tab,
+                     int64_t T, int64_t Fr, float* dst) {
     const int64_t F = FF > 0 ? FF : Fr;
-    int64_t rows[8];
-    float w[8];
-    for (size_t l = 0; l < lv.size(); ++l, dst += F) {
-        const int k = corners(lv[l], u, T - 1, rows, w);
+    for (int64_t l = 0; l < n_lev; ++l, dst += F) {
+        const int k = ring.k(s, l);
+        const int64_t* rows = ring.rows(s, l);
+        const float* w = ring.w(s, l);
         // Summed in a local array (FF > 0): dst may alias the tables for all the compiler
         // knows, which would make every product's addition a store and a reload.
         float local[FF > 0 ? FF : 1];
         float* sum = FF > 0 ? local : dst;
         for (int64_t f = 0; f < F; ++f) sum[f] = 0.0f;
         for (int j = 0; j < k; ++j) {
-            const float* src = tab + ((int64_t)l * T + rows[j]) * F;
+            const float* src = tab + (l * T + rows[j]) * F;
             for (int64_t f = 0; f < F; ++f) sum[f] += w[j] * src[f];
         }
         if (FF > 0)
@@ -96,26 +147,16 @@ inline void lookup_f(const std::vector<Level>& lv, const float* tab, int64_t T, 
     }
 }
 
-// Prefetch the rows the sample at u will read (the samples a few ahead of the gather:
-// the tables are larger than the caches and their rows random).
-inline void prefetch(const std::vector<Level>& lv, const float* tab, int64_t T, int64_t F,
-                     const float* u) {
-    int64_t rows[8];
-    float w[8];
-    for (size_t l = 0; l < lv.size(); ++l) {
-        const int k = corners(lv[l], u, T - 1, rows, w);
-        for (int j = 0; j < k; ++j) __builtin_prefetch(tab + ((int64_t)l * T + rows[j]) * F);
+// The features (n_levels * F) of samples [n0, n1) into x (n1 - n0, n_levels * F), their
+// corners taken from ring in turn (n0: the next sample the ring hands out).
+void lookup_block(CornerRing<0>& ring, int64_t n_lev, const float* tab, int64_t T, int64_t F,
+                  int64_t n0, int64_t n1, float* x) {
+    for (int64_t n = n0; n < n1; ++n, x += n_lev * F) {
+        const int64_t s = ring.next(n);
+        if (F == 4) lookup_f<4>(ring, s, n_lev, tab, T, F, x);
+        else if (F == 8) lookup_f<8>(ring, s, n_lev, tab, T, F, x);
+        else lookup_f<0>(ring, s, n_lev, tab, T, F, x);
     }
-}
-
-// Samples between a row's prefetch and its read.
-constexpr int64_t AHEAD = 16;
-
-inline void lookup(const std::vector<Level>& lv, const float* tab, int64_t T, int64_t F,
-                   const float* u, float* dst) {
-    if (F == 4) lookup_f<4>(lv, tab, T, F, u, dst);
-    else if (F == 8) lookup_f<8>(lv, tab, T, F, u, dst);
-    else lookup_f<0>(lv, tab, T, F, u, dst);
 }
 
 // Table gradient of the levels [begin, end) from g (N, n_levels, F), rows summed in
@@ -126,21 +167,20 @@ void scatter_levels_f(const std::vector<Level>& lv, const float* gp, const float
                       int64_t T, int64_t Fr, int64_t begin, int64_t end, float* a) {
     const int64_t F = FF > 0 ? FF : Fr;
     const int64_t n_lev = (int64_t)lv.size();
-    int64_t rows[8];
-    float w[8];
-    for (int64_t l = begin; l < end; ++l)
+    for (int64_t l = begin; l < end; ++l) {
+        CornerRing<1> ring(lv, l, l + 1, a, T, F, up, 0, N);
         for (int64_t n = 0; n < N; ++n) {
-            if (n + AHEAD < N) {
-                const int k = corners(lv[l], up + 3 * (n + AHEAD), T - 1, rows, w);
-                for (int j = 0; j < k; ++j) __builtin_prefetch(a + (l * T + rows[j]) * F, 1);
-            }
-            const int k = corners(lv[l], up + 3 * n, T - 1, rows, w);
+            const int64_t s = ring.next(n);
+            const int k = ring.k(s, 0);
+            const int64_t* rows = ring.rows(s, 0);
+            const float* w = ring.w(s, 0);
             const float* src = gp + (n * n_lev + l) * F;
             for (int j = 0; j < k; ++j) {
                 float* dst = a + (l * T + rows[j]) * F;
                 for (int64_t f = 0; f < F; ++f) dst[f] += w[j] * src[f];
             }
         }
+    }
 }
 
 void scatter_levels(const std::vector<Level>& lv, const float* gp, const float* up, int64_t N,
@@ -163,10 +203,8 @@ torch::Tensor grid_forward(torch::Tensor tables, torch::Tensor u, std::vector<in
     const float* up = u.data_ptr<float>();
     float* o = out.data_ptr<float>();
     at::parallel_for(0, N, 256, [&](int64_t begin, int64_t end) {
-        for (int64_t n = begin; n < end; ++n) {
-            if (n + AHEAD < end) prefetch(lv, tab, T, F, up + 3 * (n + AHEAD));
-            lookup(lv, tab, T, F, up + 3 * n, o + n * n_lev * F);
-        }
+        CornerRing<0> ring(lv, 0, n_lev, tab, T, F, up, begin, end);
+        lookup_block(ring, n_lev, tab, T, F, begin, end, o + begin * n_lev * F);
     });
     return out;
 }
@@ -200,6 +238,8 @@ namespace {
 // Corners per task of the MLP's backward: each chunk sums its weight gradient alone, and
 // the chunks are added in order, so the result does not depend on the thread count.
 constexpr int64_t AUX_CHUNK = 2048;
+// Corners whose features the forward looks up before their MLPs.
+constexpr int64_t AUX_BLOCK = 64;
 // The MLP's sizes padded with zero weights (exact: a padded unit's pre-activation is 0,
 // so relu keeps it 0 and masks its gradient), in 16-float vectors (GCC vector types: one
 // AVX-512 register, two AVX2 ones): the hidden layer is 4 vectors, the output 1.
@@ -275,11 +315,11 @@ std::vector<torch::Tensor> aux_forward(torch::Tensor tables, torch::Tensor u,
                                        std::vector<int64_t> res, std::vector<bool> dense,
                                        int64_t on_vertices, torch::Tensor w0, torch::Tensor b0,
                                        torch::Tensor w1, torch::Tensor b1, bool keep_x) {
-    const int64_t T = tables.size(1), F = tables.size(2), M = u.size(0);
+    const int64_t n_lev = tables.size(0), T = tables.size(1), F = tables.size(2), M = u.size(0);
     const auto lv = levels(res, dense, on_vertices);
     const auto mlp_ptr = std::make_unique<Mlp>(w0, b0, w1, b1);
     const Mlp& mlp = *mlp_ptr;
-    TORCH_CHECK((int64_t)lv.size() * F == mlp.I, "aux MLP input ", mlp.I, " != levels x features");
+    TORCH_CHECK(n_lev * F == mlp.I, "aux MLP input ", mlp.I, " != levels x features");
     auto out = torch::empty({M, mlp.O}, tables.options());
     const float* tab = tables.data_ptr<float>();
     const float* up = u.data_ptr<float>();
@@ -288,16 +328,20 @@ std::vector<torch::Tensor> aux_forward(torch::Tensor tables, torch::Tensor u,
     auto xs = torch::empty({keep_x ? M : 0, I}, tables.options());
     float* xp = xs.data_ptr<float>();
     at::parallel_for(0, M, 256, [&](int64_t begin, int64_t end) {
-        float x[PI];
+        // The lookup (lookup_block, compiled outside this section) rounds each product as
+        // grid_forward does; only the MLP below fuses its multiply-adds.
+        CornerRing<0> ring(lv, 0, n_lev, tab, T, F, up, begin, end);
+        float block[AUX_BLOCK * PI];   // the features of a block of corners, unless kept
         v16 h[PH / V];
-        for (int64_t n = begin; n < end; ++n) {
-            if (n + AHEAD < end) prefetch(lv, tab, T, F, up + 3 * (n + AHEAD));
-            lookup(lv, tab, T, F, up + 3 * n, x);
-            mlp.hidden(x, h);
-            const v16 y = mlp.output(h);
-            for (int64_t k = 0; k < O; ++k) o[n * O + k] = y[k];
-            if (keep_x)
-                for (int64_t i = 0; i < I; ++i) xp[n * I + i] = x[i];
+        for (int64_t n0 = begin; n0 < end; n0 += AUX_BLOCK) {
+            const int64_t n1 = std::min(end, n0 + AUX_BLOCK);
+            float* x = keep_x ? xp + n0 * I : block;
+            lookup_block(ring, n_lev, tab, T, F, n0, n1, x);
+            for (int64_t n = n0; n < n1; ++n, x += I) {
+                mlp.hidden(x, h);
+                const v16 y = mlp.output(h);
+                for (int64_t k = 0; k < O; ++k) o[n * O + k] = y[k];
+            }
         }
     });
     return {out, xs};
@@ -493,16 +537,18 @@ void corner_sum(const float* v, const int64_t* ip, const float* wp, int64_t J, i
 }
 
 template <int CC>
-void corner_scatter(const float* gp, const int64_t* ip, const float* wp, int64_t NJ, int64_t J,
+void corner_scatter(const float* gp, const int64_t* ip, const float* wp, int64_t N, int64_t J,
                     int64_t Cr, int64_t lo, int64_t hi, float* a) {
     const int64_t C = CC > 0 ? CC : Cr;
-    for (int64_t q = 0; q < NJ; ++q) {
-        const int64_t r = ip[q];
-        if (r < lo || r >= hi) continue;
-        const float wq = wp[q];
-        const float* src = gp + (q / J) * C;
-        float* dst = a + r * C;
-        for (int64_t c = 0; c < C; ++c) dst[c] += wq * src[c];
+    for (int64_t n = 0; n < N; ++n) {
+        const float* src = gp + n * C;
+        for (int64_t q = n * J; q < (n + 1) * J; ++q) {
+            const int64_t r = ip[q];
+            if (r < lo || r >= hi) continue;
+            const float wq = wp[q];
+            float* dst = a + r * C;
+            for (int64_t c = 0; c < C; ++c) dst[c] += wq * src[c];
+        }
     }
 }
 
@@ -536,9 +582,9 @@ torch::Tensor corner_backward(torch::Tensor g, torch::Tensor idx, torch::Tensor 
     const int64_t n_tasks = std::max<int64_t>(1, at::get_num_threads());
     at::parallel_for(0, n_tasks, 1, [&](int64_t t0, int64_t t1) {
         const int64_t lo = M * t0 / n_tasks, hi = M * t1 / n_tasks;
-        if (C == 12) corner_scatter<12>(gp, ip, wp, N * J, J, C, lo, hi, a);
-        else if (C == 16) corner_scatter<16>(gp, ip, wp, N * J, J, C, lo, hi, a);
-        else corner_scatter<0>(gp, ip, wp, N * J, J, C, lo, hi, a);
+        if (C == 12) corner_scatter<12>(gp, ip, wp, N, J, C, lo, hi, a);
+        else if (C == 16) corner_scatter<16>(gp, ip, wp, N, J, C, lo, hi, a);
+        else corner_scatter<0>(gp, ip, wp, N, J, C, lo, hi, a);
     });
     return grad;
 }
