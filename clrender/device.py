@@ -19,7 +19,8 @@ lists the devices that exist.
 Programs are built from ``kernels/*.cl`` with ``-D`` specialisation and cached per
 (source text, options, device); kernels are fetched from a built program once. Each
 program has two builds: the exact one (:func:`exact_options`, what the tests compare with
-the numpy references) and the fast one (:data:`FAST_OPTIONS`, for rendering).
+the numpy references) and the fast one (:data:`FAST_OPTIONS`, for rendering). On the
+Oclgrind simulator both also get ``-D OCLGRIND`` (:func:`platform_defines`).
 """
 from __future__ import annotations
 
@@ -78,7 +79,7 @@ class Runtime:
             source_dir: a folder to take the source and its headers from instead of the
                 installed ``kernels/`` (benchmarks compare kernel versions with it).
         """
-        defines = {**(defines or {}), "FAST_MATH": not exact}
+        defines = {**(defines or {}), "FAST_MATH": not exact, **platform_defines(self.device)}
         opts = tuple(f"-D{k}={_define_value(v)}" for k, v in sorted(defines.items()))
         base = exact_options(self.device) if exact else FAST_OPTIONS
         return _build(self, source_name, base + opts,
@@ -96,6 +97,13 @@ class Program:
         if name not in self._kernels:
             self._kernels[name] = getattr(self._program, name)
         return self._kernels[name]
+
+
+def platform_defines(device: cl.Device) -> dict:
+    """``{"OCLGRIND": 1}`` on the Oclgrind simulator (platform name "Oclgrind"), else
+    ``{}``: kernels keep their workarounds for Oclgrind 21.10 behind ``#ifdef OCLGRIND``,
+    so real devices build the faster forms."""
+    return {"OCLGRIND": 1} if device.platform.name.strip() == "Oclgrind" else {}
 
 
 def _define_value(v) -> str:

@@ -1,11 +1,11 @@
 /* NDRF visibility-buffer rasteriser (docs/ndrf.md "Hits"), binned into screen tiles; mirrors
  * the Embree first hits of clrender/ndrf/hits.py, which the tests hold it to:
- *   ndrf_raster_clear  the tiles' triangle counts = 0.
- *   ndrf_raster_setup  per triangle (all K meshes, faces concatenated; 16 a work-item, one
- *                      a vector lane): to camera space, edge normals, screen bounds
+ *   ndrf_raster_setup  per triangle (all K meshes, faces concatenated; LANES a work-item,
+ *                      one a vector lane): to camera space, edge normals, screen bounds
  *                      (tri_geo, tri_box); then counted in every TS x TS tile its edges do
  *                      not exclude (tile_overlaps).
- *   ndrf_raster_scan   the counts to each tile's first slot in the triangle list.
+ *   ndrf_raster_scan   one work-group: the counts to each tile's first slot in the triangle
+ *                      list (a parallel prefix sum), and back to 0 for the next frame.
  *   ndrf_raster_bin    per triangle: its index into the list of every tile it overlaps.
  *   ndrf_raster_tile   per tile (TROWS of its rows a work-item): every listed triangle tested
  *                      against the tile's pixels, TS columns at once as one vector; per
@@ -37,8 +37,9 @@
  * y0 | y1 << 16, its face within its mesh, its mesh | the tie-ownership bits of its 3
  * edges << 8 (ints); tri_box
  * (faces, 4) int: x0, y0, x1, y1 inclusive pixel bounds (x0 > x1: covers nothing);
- * tile_count (n_tiles) int, then each tile's cursor (its first slot, advanced by
- * ndrf_raster_bin); tile_start (n_tiles + 1) int; list
+ * tile_count (n_tiles) int, 0 between frames (zeroed when allocated, then by the scan);
+ * cursor (n_tiles) int, each tile's next free slot (its first, advanced by ndrf_raster_bin);
+ * tile_start (n_tiles + 1) int; list
  * (capacity) int, nothing past capacity written or read (an overflowed frame); out tri
  * (K, H, W) int (-1: miss), bary (K, H, W) float2, depth (K, H, W) float (inf on a miss).
  * ray_ab: the pixel rays' a (tiles_x * TS floats; NaN past the image's last column, so
@@ -48,7 +49,7 @@
  * -D defines (clrender/ndrf/raster_cl.py): K, TRI_WORDS (a triangle record's words: 16),
  * TS (tile side: 16, the vector width),
  * TROWS (rows of a tile a work-item covers, dividing TS: TS on CPUs, 1 on GPUs), LANES
- * (triangles a setup work-item: 16, the vector width).
+ * (triangles a setup work-item: 16 on CPUs, one a float16 lane; 1 on GPUs).
  */
 #include "camera.h"
 #pragma OPENCL FP_CONTRACT OFF
@@ -59,8 +60,25 @@
 #if TS != 16 || TS % TROWS != 0
 #error "TS must be 16 (one float16 a tile row) and a multiple of TROWS"
 #endif
-#if LANES != 16
-#error "LANES must be 16 (the setup's triangles, one a float16 lane)"
+/* The setup's values, one a triangle: lfloat / lint hold LANES of them (scalars at
+ * LANES = 1). Masks are only combined with & | and consumed by select(), so the scalar
+ * comparisons' 1 / 0 serve as the vectors' -1 / 0. */
+#if LANES == 1
+typedef float lfloat;
+typedef int lint;
+#define LANE_IDS 0
+#define CONVERT_LINT(x) convert_int(x)
+#define LLOAD(p) (*(p))
+#define LSTORE(v, p) (*(p) = (v))
+#elif LANES == 16
+typedef float16 lfloat;
+typedef int16 lint;
+#define LANE_IDS ((int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
+#define CONVERT_LINT(x) convert_int16(x)
+#define LLOAD(p) vload16(0, p)
+#define LSTORE(v, p) vstore16(v, 0, p)
+#else
+#error "LANES must be 1 or 16 (the setup's triangles a work-item, one a vector lane)"
 #endif
 /* The triangle record's fields (word offsets). */
 #define TRI_C 0                 /* 3 edge functions, 3 floats each */
@@ -77,24 +95,25 @@
 /* Where ray_ab's b values start: after the a of every column of whole tiles. */
 #define RAY_B(width) (((width) + TS - 1) / TS * TS)
 
-/* Triangle setup, LANES triangles a work-item, one per float16 lane (a scalar work-item
- * per triangle ran 2x slower on PoCL: calls and gathers do not vectorise across
- * work-items). Points and vectors are 3 float16 (x, y, z), one triangle a lane; every
- * lane computes with the float32 operations of a scalar version, in the same order. */
+/* Triangle setup, LANES triangles a work-item, one per lane (on PoCL a scalar work-item
+ * per triangle ran 2x slower than 16 lanes: calls and gathers do not vectorise across
+ * work-items). Points and vectors are 3 lfloat (x, y, z), one triangle a lane; every
+ * lane computes with the float32 operations of the scalar version (LANES = 1), in the
+ * same order. */
 
 /* p (world) to camera space: R^T (p - origin), R row-major at cam[CAM_R..]. */
-inline void to_camera(__global const float *cam, const float16 *p, float16 *v)
+inline void to_camera(__global const float *cam, const lfloat *p, lfloat *v)
 {
-    const float16 qx = p[0] - cam[CAM_O + 0], qy = p[1] - cam[CAM_O + 1],
-                  qz = p[2] - cam[CAM_O + 2];
+    const lfloat qx = p[0] - cam[CAM_O + 0], qy = p[1] - cam[CAM_O + 1],
+                 qz = p[2] - cam[CAM_O + 2];
     v[0] = cam[CAM_R + 0] * qx + cam[CAM_R + 3] * qy + cam[CAM_R + 6] * qz;
     v[1] = cam[CAM_R + 1] * qx + cam[CAM_R + 4] * qy + cam[CAM_R + 7] * qz;
     v[2] = cam[CAM_R + 2] * qx + cam[CAM_R + 5] * qy + cam[CAM_R + 8] * qz;
 }
 
-/* out = s (a x b). Arrays of float16, not float3 vectors: float3 values built in helpers
+/* out = s (a x b). Arrays of lfloat, not float3 vectors: float3 values built in helpers
  * crash the --uninitialized plugin of Oclgrind 21.10. */
-inline void cross_scaled(const float16 *a, const float16 *b, float16 s, float16 *out)
+inline void cross_scaled(const lfloat *a, const lfloat *b, lfloat s, lfloat *out)
 {
     out[0] = s * (a[1] * b[2] - a[2] * b[1]);
     out[1] = s * (a[2] * b[0] - a[0] * b[2]);
@@ -104,10 +123,10 @@ inline void cross_scaled(const float16 *a, const float16 *b, float16 s, float16 
 /* The pixel column (or row) ranges [lo, hi] whose centres +0.5 fall in [a, b], widened by
  * 0.05 pixels (a projected vertex is placed within ~1e-3 pixels: a few float32 roundings of
  * coordinates below 2^14; the edge functions decide). */
-inline void pixel_range(float16 a, float16 b, int n, int16 *lo, int16 *hi)
+inline void pixel_range(lfloat a, lfloat b, int n, lint *lo, lint *hi)
 {
-    *lo = convert_int16(fmin(fmax(ceil(a - 0.5f - 0.05f), 0.0f), (float)n));
-    *hi = convert_int16(fmax(fmin(floor(b - 0.5f + 0.05f), (float)(n - 1)), -1.0f));
+    *lo = CONVERT_LINT(fmin(fmax(ceil(a - 0.5f - 0.05f), 0.0f), (float)n));
+    *hi = CONVERT_LINT(fmax(fmin(floor(b - 0.5f + 0.05f), (float)(n - 1)), -1.0f));
 }
 
 /* s (v_a x v_b) of camera-space vertices va, vb (global indices ia, ib) into out, computed as
@@ -115,11 +134,11 @@ inline void pixel_range(float16 a, float16 b, int n, int16 *lo, int16 *hi)
  * arithmetic, but without the cancellation of two long vectors (a small triangle far from
  * the eye), and, since both triangles of a shared edge compute the same product, still
  * exactly negated between them. */
-inline void edge_normal(const float16 *va, const float16 *vb, int16 ia, int16 ib, float16 s,
-                        float16 *out)
+inline void edge_normal(const lfloat *va, const lfloat *vb, lint ia, lint ib, lfloat s,
+                        lfloat *out)
 {
-    const int16 swap = ia >= ib;
-    float16 lo[3], d[3];
+    const lint swap = ia >= ib;
+    lfloat lo[3], d[3];
     for (int j = 0; j < 3; ++j) {
         lo[j] = select(va[j], vb[j], swap);
         d[j] = select(vb[j], va[j], swap) - lo[j];
@@ -130,9 +149,9 @@ inline void edge_normal(const float16 *va, const float16 *vb, int16 ia, int16 ib
 /* Whether a pixel centre exactly on edge c (E = 0) counts as covered: c lexicographically
  * positive (the tie rule); 1 or 0 a lane. (Masks become 0 / 1 by select(): Oclgrind 21.10
  * evaluates -mask and mask & 1 of vector comparisons as 255.) */
-inline int16 edge_owns_ties(const float16 *c)
+inline lint edge_owns_ties(const lfloat *c)
 {
-    return select((int16)(0), (int16)(1), (c[0] > 0.0f) | ((c[0] == 0.0f)
+    return select((lint)(0), (lint)(1), (c[0] > 0.0f) | ((c[0] == 0.0f)
                   & ((c[1] > 0.0f) | ((c[1] == 0.0f) & (c[2] > 0.0f)))));
 }
 
@@ -175,12 +194,6 @@ inline void for_each_tile(int g, const float *c, int4 b, int width,
             }
 }
 
-__kernel void ndrf_raster_clear(const int n_tiles, __global int *tile_count)
-{
-    const int i = (int)get_global_id(0);
-    if (i < n_tiles) tile_count[i] = 0;
-}
-
 /* Triangles g0 .. g0 + LANES - 1 of the concatenated faces: camera-space edge normals, n and
  * V, their mesh and face within it, inclusive pixel bounds and tie bits into tri_geo and
  * tri_box, and each counted in its tiles (tile_count). A triangle that cannot cover a pixel
@@ -206,60 +219,60 @@ __kernel void ndrf_raster_setup(__global const float *cam, const int width, cons
             for (int e = 0; e < 3; ++e) world[j][e][l] = vertices[3 * index[j][l] + e];
         }
     }
-    const int16 g = g0 + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    int16 mesh = (int16)(0), i[3];
-    for (int j = 1; j < K; ++j) mesh += select((int16)(0), (int16)(1), g >= face_start[j]);
-    float16 v[3][3], p[3], e1[3], e2[3], n[3], c[3][3];
+    const lint g = g0 + LANE_IDS;
+    lint mesh = (lint)(0), i[3];
+    for (int j = 1; j < K; ++j) mesh += select((lint)(0), (lint)(1), g >= face_start[j]);
+    lfloat v[3][3], p[3], e1[3], e2[3], n[3], c[3][3];
     for (int j = 0; j < 3; ++j) {
-        i[j] = vload16(0, index[j]);
-        for (int e = 0; e < 3; ++e) p[e] = vload16(0, world[j][e]);
+        i[j] = LLOAD(index[j]);
+        for (int e = 0; e < 3; ++e) p[e] = LLOAD(world[j][e]);
         to_camera(cam, p, v[j]);
     }
     for (int e = 0; e < 3; ++e) {
         e1[e] = v[1][e] - v[0][e];
         e2[e] = v[2][e] - v[0][e];
     }
-    cross_scaled(e1, e2, (float16)(1.0f), n);
-    const float16 V = n[0] * v[0][0] + n[1] * v[0][1] + n[2] * v[0][2];
-    const float16 s = select((float16)(-1.0f), (float16)(1.0f), V > 0.0f);
+    cross_scaled(e1, e2, (lfloat)(1.0f), n);
+    const lfloat V = n[0] * v[0][0] + n[1] * v[0][1] + n[2] * v[0][2];
+    const lfloat s = select((lfloat)(-1.0f), (lfloat)(1.0f), V > 0.0f);
     edge_normal(v[1], v[2], i[1], i[2], s, c[0]);
     edge_normal(v[2], v[0], i[2], i[0], s, c[1]);
     edge_normal(v[0], v[1], i[0], i[1], s, c[2]);
     /* Camera looks down -z: depth -z. A vertex at or behind the camera plane: the covered
      * rays may lie anywhere on screen, bound by the image. */
     const float eps = 1e-7f;
-    const int16 near = (-v[0][2] <= eps) | (-v[1][2] <= eps) | (-v[2][2] <= eps);
-    float16 sx[3], sy[3];
+    const lint near = (-v[0][2] <= eps) | (-v[1][2] <= eps) | (-v[2][2] <= eps);
+    lfloat sx[3], sy[3];
     for (int j = 0; j < 3; ++j) {
         sx[j] = v[j][0] / -v[j][2];
         sy[j] = v[j][1] / -v[j][2];
     }
     /* pixel x + 0.5 = cx + fx a, y + 0.5 = cy - fy b (kernels/camera.h) */
-    int16 x0, x1, y0, y1;
+    lint x0, x1, y0, y1;
     pixel_range(cam[CAM_CX] + cam[CAM_FX] * fmin(sx[0], fmin(sx[1], sx[2])),
                 cam[CAM_CX] + cam[CAM_FX] * fmax(sx[0], fmax(sx[1], sx[2])), width, &x0, &x1);
     pixel_range(cam[CAM_CY] - cam[CAM_FY] * fmax(sy[0], fmax(sy[1], sy[2])),
                 cam[CAM_CY] - cam[CAM_FY] * fmin(sy[0], fmin(sy[1], sy[2])), height, &y0, &y1);
-    x0 = select(x0, (int16)(0), near);
-    x1 = select(x1, (int16)(width - 1), near);
-    y0 = select(y0, (int16)(0), near);
-    y1 = select(y1, (int16)(height - 1), near);
-    const int16 facing = (V != 0.0f) & ((v[0][2] < 0.0f) | (v[1][2] < 0.0f) | (v[2][2] < 0.0f));
-    const int16 ok = facing & (x0 <= x1) & (y0 <= y1);
+    x0 = select(x0, (lint)(0), near);
+    x1 = select(x1, (lint)(width - 1), near);
+    y0 = select(y0, (lint)(0), near);
+    y1 = select(y1, (lint)(height - 1), near);
+    const lint facing = (V != 0.0f) & ((v[0][2] < 0.0f) | (v[1][2] < 0.0f) | (v[2][2] < 0.0f));
+    const lint ok = facing & (x0 <= x1) & (y0 <= y1);
     /* The records, lane by lane through private memory. */
     float rec[TRI_ROWS][LANES];
     int rows[LANES], meta[LANES], box[4][LANES];
     for (int j = 0; j < 3; ++j)
-        for (int e = 0; e < 3; ++e) vstore16(c[j][e], 0, rec[TRI_C + 3 * j + e]);
-    for (int j = 0; j < 3; ++j) vstore16(s * n[j], 0, rec[TRI_N + j]);
-    vstore16(s * V, 0, rec[TRI_V]);
-    vstore16(y0 | y1 << 16, 0, rows);      /* height < 2^16 (clrender/ndrf/raster_cl.py) */
-    vstore16(mesh | (edge_owns_ties(c[0]) | edge_owns_ties(c[1]) << 1
-                     | edge_owns_ties(c[2]) << 2) << 8, 0, meta);
-    vstore16(select((int16)(1), x0, ok), 0, box[0]);    /* x0 > x1: covers nothing */
-    vstore16(y0, 0, box[1]);
-    vstore16(select((int16)(0), x1, ok), 0, box[2]);
-    vstore16(y1, 0, box[3]);
+        for (int e = 0; e < 3; ++e) LSTORE(c[j][e], rec[TRI_C + 3 * j + e]);
+    for (int j = 0; j < 3; ++j) LSTORE(s * n[j], rec[TRI_N + j]);
+    LSTORE(s * V, rec[TRI_V]);
+    LSTORE(y0 | y1 << 16, rows);      /* height < 2^16 (clrender/ndrf/raster_cl.py) */
+    LSTORE(mesh | (edge_owns_ties(c[0]) | edge_owns_ties(c[1]) << 1
+                   | edge_owns_ties(c[2]) << 2) << 8, meta);
+    LSTORE(select((lint)(1), x0, ok), box[0]);    /* x0 > x1: covers nothing */
+    LSTORE(y0, box[1]);
+    LSTORE(select((lint)(0), x1, ok), box[2]);
+    LSTORE(y1, box[3]);
     for (int l = 0; l < LANES && g0 + l < n_faces; ++l) {
         __global float *geo = tri_geo + TRI_WORDS * (g0 + l);
         __global int *w = (__global int *)geo;
@@ -275,20 +288,37 @@ __kernel void ndrf_raster_setup(__global const float *cam, const int width, cons
     }
 }
 
-/* One work-item: tile_start = the exclusive prefix sum of tile_count, tile_start[n_tiles]
- * the total; tile_count becomes each tile's cursor (its first slot). */
+/* One work-group of n = get_local_size(0) work-items, sums (n) int of local memory:
+ * tile_start = the exclusive prefix sum of tile_count, tile_start[n_tiles] the total;
+ * cursor = tile_start; tile_count = 0 (the next frame counts into it). Work-item i scans
+ * the i-th contiguous block of ceil(n_tiles / n) tiles: its block's sum, the block sums'
+ * inclusive scan in local memory (Hillis-Steele, ceil(log2 n) steps), then its block's
+ * offsets. Integer sums: the same values as a serial scan in any order. */
 __kernel void ndrf_raster_scan(const int n_tiles, __global int *tile_count,
-                               __global int *tile_start)
+                               __global int *tile_start, __global int *cursor,
+                               __local int *sums)
 {
-    if (get_global_id(0) != 0) return;
-    int s = 0;
-    for (int i = 0; i < n_tiles; ++i) {
-        const int c = tile_count[i];
-        tile_start[i] = s;
-        tile_count[i] = s;
+    const int i = (int)get_local_id(0), n = (int)get_local_size(0);
+    const int per = (n_tiles + n - 1) / n;
+    const int i0 = min(i * per, n_tiles), i1 = min(i0 + per, n_tiles);
+    int own = 0;
+    for (int t = i0; t < i1; ++t) own += tile_count[t];
+    sums[i] = own;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int d = 1; d < n; d *= 2) {
+        const int left = i >= d ? sums[i - d] : 0;
+        barrier(CLK_LOCAL_MEM_FENCE);
+        sums[i] += left;
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    int s = sums[i] - own;
+    for (int t = i0; t < i1; ++t) {
+        const int c = tile_count[t];
+        tile_start[t] = cursor[t] = s;
+        tile_count[t] = 0;
         s += c;
     }
-    tile_start[n_tiles] = s;
+    if (i == n - 1) tile_start[n_tiles] = s;
 }
 
 __kernel void ndrf_raster_bin(const int width, const int n_faces, __global const float *ray_ab,

@@ -86,6 +86,50 @@ typedef float16 hvec;
 #define VIEW_C (3 + 6 * N_FREQ)
 #define VIEW_OFF ((FEATURES + 3) * K)
 
+/* The fast build's view table lookups of a conv0 row: its SEG + PAD input pixels, one a lane
+ * of a ROW_LANES-wide vector (the narrowest OpenCL width that holds them: 2 at SEG = 1). */
+#if SEG + PAD == 1
+#define ROW_LANES 1
+typedef float row_float;
+typedef int row_int;
+#define ROW_LANE_IDS 0
+#define CONVERT_ROW_FLOAT(x) convert_float(x)
+#define CONVERT_ROW_INT(x) convert_int(x)
+#define ROW_STORE(v, p) (*(p) = (v))
+#elif SEG + PAD == 2
+#define ROW_LANES 2
+typedef float2 row_float;
+typedef int2 row_int;
+#define ROW_LANE_IDS ((int2)(0, 1))
+#define CONVERT_ROW_FLOAT(x) convert_float2(x)
+#define CONVERT_ROW_INT(x) convert_int2(x)
+#define ROW_STORE(v, p) vstore2(v, 0, p)
+#elif SEG + PAD <= 4
+#define ROW_LANES 4
+typedef float4 row_float;
+typedef int4 row_int;
+#define ROW_LANE_IDS ((int4)(0, 1, 2, 3))
+#define CONVERT_ROW_FLOAT(x) convert_float4(x)
+#define CONVERT_ROW_INT(x) convert_int4(x)
+#define ROW_STORE(v, p) vstore4(v, 0, p)
+#elif SEG + PAD <= 8
+#define ROW_LANES 8
+typedef float8 row_float;
+typedef int8 row_int;
+#define ROW_LANE_IDS ((int8)(0, 1, 2, 3, 4, 5, 6, 7))
+#define CONVERT_ROW_FLOAT(x) convert_float8(x)
+#define CONVERT_ROW_INT(x) convert_int8(x)
+#define ROW_STORE(v, p) vstore8(v, 0, p)
+#else
+#define ROW_LANES 16
+typedef float16 row_float;
+typedef int16 row_int;
+#define ROW_LANE_IDS ((int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
+#define CONVERT_ROW_FLOAT(x) convert_float16(x)
+#define CONVERT_ROW_INT(x) convert_int16(x)
+#define ROW_STORE(v, p) vstore16(v, 0, p)
+#endif
+
 /* The hits of one frame and the meshes they index. */
 typedef struct {
     __global const float *cam;
@@ -120,8 +164,9 @@ inline int ndrf_covered(const Frame *f, int p)
 
 /* d, then sin(2^i d), cos(2^i d) for i < N_FREQ (2^i d: exact scaling, as in the
  * reference), five frequencies at a time: one float16 call vectorises where a scalar call
- * per channel does not (PoCL: ~30x faster). sincos() would save a little more but breaks
- * the --uninitialized plugin of Oclgrind 21.10 (its output pointer). */
+ * per channel does not (PoCL: ~30x faster). sincos() shares the range reduction; under
+ * -D OCLGRIND separate sin() and cos(): sincos() breaks the --uninitialized plugin of
+ * Oclgrind 21.10 (its output pointer). */
 inline void ndrf_view_encoding(float3 d, float *v)
 {
     vstore3(d, 0, v);
@@ -134,8 +179,14 @@ inline void ndrf_view_encoding(float3 d, float *v)
         }
         a[15] = 0.0f;
         const float16 a16 = vload16(0, a);
+#ifndef OCLGRIND
+        float16 c16;
+        vstore16(sincos(a16, &c16), 0, sa);
+        vstore16(c16, 0, ca);
+#else
         vstore16(sin(a16), 0, sa);
         vstore16(cos(a16), 0, ca);
+#endif
         for (int i = 0; i < 5 && i0 + i < N_FREQ; ++i) {
             vstore3(vload3(i, sa), 0, v + 3 + 6 * (i0 + i));
             vstore3(vload3(i, ca), 0, v + 6 + 6 * (i0 + i));
@@ -243,26 +294,26 @@ inline void ndrf_conv0_pixel(const Frame *f, int px, int py, int *inside, int *v
 #endif
 }
 
-/* The fast build's view table lookups of the 16 pixels x0 .. x0 + 15 of row py, one a
- * lane: node[c] and frac[c] for direction component c. The ray direction of
+/* The fast build's view table lookups of the ROW_LANES pixels x0 .. x0 + ROW_LANES - 1 of
+ * row py, one a lane: node[c] and frac[c] for direction component c. The ray direction of
  * kernels/camera.h with one division where it has five (inv_f: the reciprocal focal
  * lengths, once a work-item): a few ulp off. */
 inline void ndrf_view_nodes(__global const float *cam, const float *inv_f, int x0, int py,
-                            int16 *node, float16 *frac)
+                            row_int *node, row_float *frac)
 {
-    const int16 px = x0 + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-    const float16 a = (convert_float16(px) + 0.5f - cam[CAM_CX]) * inv_f[0];
+    const row_int px = x0 + ROW_LANE_IDS;
+    const row_float a = (CONVERT_ROW_FLOAT(px) + 0.5f - cam[CAM_CX]) * inv_f[0];
     const float b = -(((float)py + 0.5f - cam[CAM_CY]) * inv_f[1]);
-    float16 dc[3];
+    row_float dc[3];
     for (int c = 0; c < 3; ++c)
         dc[c] = cam[CAM_R + 3 * c] * a + cam[CAM_R + 1 + 3 * c] * b - cam[CAM_R + 2 + 3 * c];
-    const float16 inv_norm = 1.0f / sqrt(dc[0] * dc[0] + dc[1] * dc[1] + dc[2] * dc[2]);
+    const row_float inv_norm = 1.0f / sqrt(dc[0] * dc[0] + dc[1] * dc[1] + dc[2] * dc[2]);
     for (int c = 0; c < 3; ++c) {
-        const float16 u = (dc[c] * inv_norm + 1.0f) * (0.5f * (float)(VIEW_NODES - 1));
+        const row_float u = (dc[c] * inv_norm + 1.0f) * (0.5f * (float)(VIEW_NODES - 1));
         /* Clamped as a float (the same node): Oclgrind 21.10's clamp() of an int16 is
          * wrong. */
-        node[c] = convert_int16(fmin(fmax(u, 0.0f), (float)(VIEW_NODES - 2)));
-        frac[c] = u - convert_float16(node[c]);
+        node[c] = CONVERT_ROW_INT(fmin(fmax(u, 0.0f), (float)(VIEW_NODES - 2)));
+        frac[c] = u - CONVERT_ROW_FLOAT(node[c]);
     }
 }
 
@@ -328,14 +379,14 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
         for (int i = 0; i < nx; ++i)
             ndrf_conv0_pixel(&f, x0 + i, y0 + r, &inside[r][i], vi[r][i], vw[r][i], view[r][i]);
 #if FAST_MATH
-        int16 n16[3];
-        float16 f16[3];
-        int nodes[3][16];
-        float fracs[3][16];
-        ndrf_view_nodes(cam, inv_f, x0, y0 + r, n16, f16);
+        row_int row_node[3];
+        row_float row_frac[3];
+        int nodes[3][ROW_LANES];
+        float fracs[3][ROW_LANES];
+        ndrf_view_nodes(cam, inv_f, x0, y0 + r, row_node, row_frac);
         for (int c = 0; c < 3; ++c) {
-            vstore16(n16[c], 0, nodes[c]);
-            vstore16(f16[c], 0, fracs[c]);
+            ROW_STORE(row_node[c], nodes[c]);
+            ROW_STORE(row_frac[c], fracs[c]);
         }
         for (int i = 0; i < nx; ++i)
             for (int c = 0; c < 3; ++c) {
@@ -368,11 +419,21 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
     }
 }
 
-/* The sum of a's lanes, halving through private memory: .lo/.hi shuffles crash the
- * --uninitialized plugin of Oclgrind 21.10, and a scalar loop costs PoCL more than the
- * conv itself. */
+/* The sum of a's lanes by halving (a scalar loop costs PoCL more than the conv itself):
+ * .lo/.hi shuffles in registers; under -D OCLGRIND the same sums through private memory,
+ * as the shuffles crash the --uninitialized plugin of Oclgrind 21.10. */
 inline float ndrf_sum(hvec a)
 {
+#ifndef OCLGRIND
+#if H_VEC == 16
+    const float8 a8 = a.lo + a.hi;
+#else
+    const float8 a8 = a;
+#endif
+    const float4 a4 = a8.lo + a8.hi;
+    const float2 a2 = a4.lo + a4.hi;
+    return a2.x + a2.y;
+#else
     float t[H_VEC];
     vstore_h(a, 0, t);
 #if H_VEC == 16
@@ -381,6 +442,7 @@ inline float ndrf_sum(hvec a)
     vstore4(vload4(0, t) + vload4(1, t), 0, t);
     vstore2(vload2(0, t) + vload2(1, t), 0, t);
     return t[0] + t[1];
+#endif
 }
 
 /* The three colour channels at once (lane 3 unused): one vector exp instead of three. */

@@ -15,15 +15,24 @@
  *
  * Sizes from config.kernel_constants: FEATURES (8: 7 composited + opacity), SH_DIM (16),
  * DEFERRED_HIDDEN (64).
- * params: [w0 (23, 64), b0 (64), w1 (64, 64), b1 (64), w2 (64, 3), b2 (3)] float32.
+ * params: [w0 (23, 64), b0 (64), w1 (64, 64), b1 (64), w2 (64, 3), b2 (3)] float32, in
+ * __constant memory with -D DEFERRED_CONSTANT=1 (the host sets it where the device's
+ * constant buffer holds them: every work-item reads the same weight at once, which a GPU's
+ * constant cache broadcasts), else __global.
  */
 #include "camera.h"
 #include "ngprt_math.h"
 #pragma OPENCL FP_CONTRACT OFF
 
 #if !defined(FEATURES) || !defined(SH_DIM) || !defined(DEFERRED_HIDDEN) || \
-    !defined(DEFERRED_VEC) || !defined(FAST_MATH)
-#error "ngprt_deferred.cl needs -D FEATURES SH_DIM DEFERRED_HIDDEN DEFERRED_VEC FAST_MATH"
+    !defined(DEFERRED_VEC) || !defined(DEFERRED_CONSTANT) || !defined(FAST_MATH)
+#error "ngprt_deferred.cl needs -D FEATURES SH_DIM DEFERRED_HIDDEN DEFERRED_VEC \
+    DEFERRED_CONSTANT FAST_MATH"
+#endif
+#if DEFERRED_CONSTANT
+#define WEIGHT __constant const float
+#else
+#define WEIGHT __global const float
 #endif
 /* The code's shape fixes these: the march writes 7 features + opacity per pixel, ngp_sh4
  * spells out degree 4, the hidden layers run four outputs per pass. */
@@ -96,14 +105,13 @@ inline vfloat ngp_relu(vfloat x)
 
 /* out[j] = relu(sum_i in[i] * w[i, j] + b[j]) for j < HID; four outputs per pass so
  * each input vector is loaded once for four broadcast weights. */
-inline void ngp_dense_relu(const vfloat *in, int n_in, __global const float *w,
-                           __global const float *b, vfloat *out)
+inline void ngp_dense_relu(const vfloat *in, int n_in, WEIGHT *w, WEIGHT *b, vfloat *out)
 {
     for (int j = 0; j < HID; j += 4) {
         vfloat a0 = 0.0f, a1 = 0.0f, a2 = 0.0f, a3 = 0.0f;
         for (int i = 0; i < n_in; ++i) {
             const vfloat x = in[i];
-            __global const float *wi = w + i * HID + j;
+            WEIGHT *wi = w + i * HID + j;
             a0 = a0 + x * wi[0];
             a1 = a1 + x * wi[1];
             a2 = a2 + x * wi[2];
@@ -141,7 +149,7 @@ inline void ngp_load_inputs(__global const float *cam, int width, int n_pix, int
 }
 
 __kernel void ngprt_deferred(__global const float *cam, const int width, const int n_pix,
-                             __global const float *feat, __global const float *params,
+                             __global const float *feat, WEIGHT *params,
                              const float bg_r, const float bg_g, const float bg_b,
                              __global float *rgb)
 {
@@ -163,7 +171,7 @@ __kernel void ngprt_deferred(__global const float *cam, const int width, const i
     ngp_load_inputs(cam, width, n_pix, p0, feat, x, &opacity);
     ngp_dense_relu(x, IN, params + P_W0, params + P_B0, h1);
     ngp_dense_relu(h1, HID, params + P_W1, params + P_B1, h2);
-    __global const float *w2 = params + P_W2, *b2 = params + P_B2;
+    WEIGHT *w2 = params + P_W2, *b2 = params + P_B2;
     vfloat o0 = 0.0f, o1 = 0.0f, o2 = 0.0f;
     for (int i = 0; i < HID; ++i) {
         o0 = o0 + h2[i] * w2[3 * i];

@@ -16,8 +16,8 @@ Tolerances (stated, not tuned; tests/ndrf_hits_check.py says what "explained" me
   the surface);
 - rendered images: >= 50 dB PSNR between the raster and the Embree path (random and
   trained models); the shader's exact build within 1e-5 of the numpy reference on raster hits.
-Both work layouts run: a whole tile a work-item (CPUs) and a tile row a work-item (GPUs);
-they give the same hits bit for bit.
+Both work layouts run: a whole tile a tile work-item and 16 triangles a setup work-item
+(CPUs), a tile row and one triangle (GPUs); every layout gives the same hits bit for bit.
 """
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ from clrender.metrics import psnr
 from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.hits import HitCaster
 from clrender.ndrf.random_model import random_ndrf_model
-from clrender.ndrf.raster_cl import Rasteriser, morton_order
+from clrender.ndrf.raster_cl import GPU_LAYOUT, Rasteriser, morton_order
 from clrender.ndrf.render import Renderer
 from clrender.ndrf.shader_ref import shade_reference
 from ndrf_hits_check import compare
@@ -79,12 +79,12 @@ def _check_hits(meshes, camera, raster_hits, embree_hits, strict_agreement=True)
     return s
 
 
-@pytest.mark.parametrize("rows", [16, 1])
+@pytest.mark.parametrize("layout", [{"rows": 16, "lanes": 16}, GPU_LAYOUT], ids=["cpu", "gpu"])
 @pytest.mark.parametrize("K", [1, 2, 3, 4])
-def test_raster_matches_embree(K, rows, cl_platform):
+def test_raster_matches_embree(K, layout, cl_platform):
     model = _model(K)
     meshes = [model.mesh(k)[:2] for k in range(K)]
-    raster, caster = Rasteriser(model, rows=rows), HitCaster(model)
+    raster, caster = Rasteriser(model, **layout), HitCaster(model)
     for name, (fov, c2w) in _views(model).items():
         camera = Camera.from_fov(fov, 96, 72, c2w)
         s = _check_hits(meshes, camera, raster.hits(camera), caster.cast_camera(camera),
@@ -96,9 +96,9 @@ def test_layouts_agree_bit_for_bit(cl_platform):
     model = _model(3)
     for name in ("close-up", "inside"):
         camera = Camera.from_fov(0.9, 61, 47, _views(model)[name][1])
-        a = Rasteriser(model, rows=16).hits(camera)
-        for rows in (1, 4):
-            b = Rasteriser(model, rows=rows).hits(camera)
+        a = Rasteriser(model, rows=16, lanes=16).hits(camera)
+        for rows, lanes in ((1, 1), (4, 16), (16, 1)):
+            b = Rasteriser(model, rows=rows, lanes=lanes).hits(camera)
             for x, y in ((a.tri, b.tri), (a.bary, b.bary), (a.depth, b.depth)):
                 np.testing.assert_array_equal(x, y)
 
@@ -119,6 +119,8 @@ def test_morton_order_is_a_local_permutation():
 def test_invalid_layout_is_refused():
     with pytest.raises(ValueError, match="rows=3: must divide the tile side 16"):
         Rasteriser(_model(1), rows=3)
+    with pytest.raises(ValueError, match="lanes=8: the setup takes 1 or 16 triangles"):
+        Rasteriser(_model(1), lanes=8)
 
 
 def test_shared_edges_cover_each_pixel_once(cl_platform):

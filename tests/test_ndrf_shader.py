@@ -9,7 +9,8 @@ Tolerances (stated, not tuned):
 - screen buffer (what conv0 gathers), kernel vs reference: features and hit positions
   bit-identical (same float32 operations in the same order), view encoding within 1e-6.
 - the fast build (the tabulated view channels, native exp) against the exact one: >= 50 dB
-  PSNR.
+  PSNR, in the GPU layout (one pixel a conv0 work-item), blocks of 3 x 5 and the device's
+  own layout.
 - reference conv shader vs torch.nn.functional.conv2d in float64: max abs 1e-5.
 - uncovered pixels: exactly the background.
 """
@@ -25,7 +26,7 @@ from clrender.ndrf.baked import validate
 from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.hits import HitCaster
 from clrender.ndrf.random_model import random_ndrf_model
-from clrender.ndrf.shader_cl import Shader
+from clrender.ndrf.shader_cl import GPU_LAYOUT, Shader
 from clrender.ndrf.shader_cl import kernel_defines
 from clrender.ndrf.shader_ref import _conv, conv0_factored, conv_shader, screen_buffer, \
     shade_reference, vertex_projections, view_encoding, view_weights
@@ -135,15 +136,19 @@ def test_screen_buffer_matches_reference(kernel_size, cl_platform):
         np.testing.assert_allclose(out[..., n_geo:], ref[..., n_geo:], rtol=0, atol=VIEW_ATOL)
 
 
+# The view table lookups of a conv0 row, SEG + KSIZE - 1 pixels, run 1 (GPU layout,
+# kernel_size 1), 2, 4 (SEG = 3), 8 and 16 (the CPU layouts' SEG = 8) lanes wide.
+@pytest.mark.parametrize("layout", [GPU_LAYOUT, {"H_VEC": 8, "SEG": 3, "ROWS": 5}, None],
+                         ids=["gpu", "seg3", "device"])
 @pytest.mark.parametrize("kernel_size", [2, 1])
-def test_fast_build_within_50_db_of_exact(kernel_size):
+def test_fast_build_within_50_db_of_exact(kernel_size, layout, cl_platform):
     from clrender.metrics import psnr
 
     model = _model(2, kernel_size)
-    fast = Shader(model)
+    fast, exact = Shader(model, layout=layout), Shader(model, exact=True, layout=layout)
     for width, height, c2w in VIEWS:
         camera, hits, _ = _inputs(model, width, height, c2w)
-        exact_rgb, _ = _shader(2, kernel_size).shade(camera, hits.tri, hits.bary)
+        exact_rgb, _ = exact.shade(camera, hits.tri, hits.bary)
         fast_rgb, _ = fast.shade(camera, hits.tri, hits.bary)
         assert psnr(fast_rgb, exact_rgb) >= 50.0
 

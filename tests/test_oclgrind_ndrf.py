@@ -1,12 +1,12 @@
 """NDRF's kernels under the Oclgrind simulator (the harness and what it checks:
 tests/test_oclgrind.py): the rasteriser (kernels/ndrf_raster.cl) in both layouts (a tile
-or a tile row a work-item), from an orbit, from close (triangles over several tiles) and
-from inside the meshes (triangles crossing the camera plane); the shader
-(kernels/ndrf_shade.cl) on a tiny random model (K=2, 10x8 pixels, hits on the image border
-and misses) with both kernel sizes, both conv0 organisations and both builds, two frames
-each, from rasterised hits, and once in bands of 3 rows; and the refusal of an image whose
-buffers exceed the simulator's 128 MiB allocation limit (a clear error, nothing
-enqueued).
+and 16 triangles, or a tile row and one triangle, a work-item), from an orbit, from close
+(triangles over several tiles) and from inside the meshes (triangles crossing the camera
+plane); the shader (kernels/ndrf_shade.cl) on a tiny random model (K=2, 10x8 pixels, hits
+on the image border and misses) with both kernel sizes, both conv0 organisations and both
+builds, two frames each, from rasterised hits, and once in bands of 3 rows; and the refusal
+of an image whose buffers exceed the simulator's 128 MiB allocation limit (a clear error,
+nothing enqueued).
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from test_oclgrind import _oclgrind, assert_clean
 
 SCRIPT = """
 from clrender.camera import Camera, look_at
-from clrender.ndrf import shader_cl
+from clrender.ndrf import raster_cl, shader_cl
 from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.random_model import random_ndrf_model
 from clrender.ndrf.raster_cl import Rasteriser
@@ -30,11 +30,11 @@ model = random_ndrf_model(NDRFConfig(thresholds=(1e-4, 1e-2)), 0)
 views = {"border": Camera.from_fov(0.8, 10, 8, look_at([1.6, -1.2, 0.7], [-0.4, 0.4, 0.45])),
          "close": Camera.from_fov(1.2, 40, 36, look_at([0.9, -0.2, 0.1])),
          "inside": Camera.from_fov(1.4, 10, 8, look_at([0.1, 0.05, 0.0], [1.0, 0.3, 0.2]))}
-for rows in (16, 1):
+for layout in ({"rows": 16, "lanes": 16}, raster_cl.GPU_LAYOUT):
     for name, camera in views.items():
-        keep.append(Rasteriser(model, rows=rows))
+        keep.append(Rasteriser(model, **layout))
         hits = keep[-1].hits(camera)
-        print("RASTER", rows, name, int((hits.tri >= 0).sum()), keep[-1].binned_pairs,
+        print("RASTER", layout["rows"], name, int((hits.tri >= 0).sum()), keep[-1].binned_pairs,
               flush=True)
 keep.append(Rasteriser(model))
 hits = keep[-1].hits(views["border"])
@@ -65,7 +65,6 @@ except ValueError as e:
     print("REFUSED", e, flush=True)
 # Last (growing the list releases a buffer): a frame overflowing its tile list reads none
 # of it past its end, and is binned again into a larger one.
-from clrender.ndrf import raster_cl
 raster_cl.INITIAL_PAIRS = 8
 keep.append(Rasteriser(model))
 hits = keep[-1].hits(views["close"])

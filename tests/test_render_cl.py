@@ -11,6 +11,7 @@ strictly fewer marching points in total.
 from __future__ import annotations
 
 import itertools
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ import pytest
 from clrender.camera import generate_rays
 from clrender.ngprt.config import VARIANTS, preset
 from clrender.ngprt.random_model import random_baked_model
+from clrender.ngprt import render_cl
 from clrender.ngprt.render_cl import Renderer
 from clrender.ngprt.render_ref import march_reference, render_reference
 from clrender.paths import path_cameras
@@ -68,6 +70,30 @@ def test_lane_widths_match_reference(variant, scene, rays, deferred_vec, cl_plat
     ref = render_reference(model, camera, background=BACKGROUND, use_G=True)
     assert out["n_occ"].sum() > 0, "test model has no occupied sample in view"
     _assert_matches(out, ref)
+
+
+@pytest.mark.parametrize("in_constant", [True, False])
+def test_deferred_weights_in_either_memory_match_reference(in_constant, monkeypatch,
+                                                           cl_platform):
+    # Both builds of the deferred MLP's weight argument (-D DEFERRED_CONSTANT), whichever
+    # the device would choose.
+    monkeypatch.setattr(render_cl, "deferred_in_constant", lambda device: in_constant)
+    model, camera = _model("separate-v", "bounded"), _camera("bounded")
+    renderer = Renderer(model, use_G=True, exact=True)
+    assert renderer.deferred_constant is in_constant
+    out = renderer.render(camera, background=BACKGROUND, stats=True)
+    ref = render_reference(model, camera, background=BACKGROUND, use_G=True)
+    _assert_matches(out, {k: np.asarray(v).reshape(out[k].shape) for k, v in ref.items()
+                          if k in out})
+
+
+def test_deferred_weights_in_constant_only_where_they_fit():
+    fits = SimpleNamespace(max_constant_buffer_size=64 << 10, max_constant_args=8)
+    assert render_cl.deferred_in_constant(fits)
+    assert not render_cl.deferred_in_constant(SimpleNamespace(max_constant_buffer_size=16 << 10,
+                                                              max_constant_args=8))
+    assert not render_cl.deferred_in_constant(SimpleNamespace(max_constant_buffer_size=64 << 10,
+                                                              max_constant_args=0))
 
 
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])

@@ -1,12 +1,12 @@
 """The OpenCL visibility-buffer rasteriser of NDRF's K meshes (``kernels/ndrf_raster.cl``).
 
-Per frame, on the device: set up every triangle in camera space and bin it into the
-TS x TS screen tiles its edges may cover (count, prefix sum, fill), then cover each tile's
-pixels with its triangles, a whole tile row as one vector, keeping the nearest triangle per
-pixel and mesh in private memory (a tile owns its pixels: no atomic depth test, so any
-OpenCL 1.1 device runs it) with the hits the shader reads: triangle id, Embree's
-barycentrics (u, v) and the depth along the unit ray, from the same edge functions (exact
-ray-triangle in camera space, docs/ndrf.md). The hit buffers stay on the device for
+Per frame, on the device: set up every triangle in camera space and bin it into the TS x TS
+screen tiles its edges may cover (count, a one-work-group prefix sum, fill), then cover
+each tile's pixels with its triangles, a whole tile row as one vector, keeping the nearest
+triangle per pixel and mesh in private memory (a tile owns its pixels: no atomic depth
+test, so any OpenCL 1.1 device runs it) with the hits the shader reads: triangle id,
+Embree's barycentrics (u, v) and the depth along the unit ray, from the same edge functions
+(exact ray-triangle in camera space, docs/ndrf.md). The hit buffers stay on the device for
 :class:`clrender.ndrf.shader_cl.Shader`; :meth:`Rasteriser.hits` reads them back (tests,
 statistics). :class:`clrender.ndrf.hits.HitCaster` (Embree) is the reference.
 
@@ -16,8 +16,10 @@ nor read past it) and reads the count back without waiting. After the frame's bl
 read of its outputs, :meth:`Rasteriser.settle` checks the count: on overflow (rare: the
 list only grows) the list is grown and the frame binned and tiled again.
 
-A work-item covers ``TROWS`` rows of a tile: the whole tile on CPUs (one float16 a row, the
-triangle list read once), one row on GPUs (TS work-items a tile). However close the camera,
+The layout (:func:`device_layout`): a setup work-item takes ``lanes`` triangles, 16 on CPUs
+(one a float16 lane) and 1 on GPUs; a tile work-item covers ``rows`` rows of a tile, the
+whole tile on CPUs (one float16 a row, the triangle list read once) and one row on GPUs (TS
+work-items a tile). However close the camera,
 no work-item loops over more than TS^2 pixels a triangle, and a triangle enters only the
 tiles its edge functions do not exclude at the tile's corners (long slivers stay cheap).
 
@@ -46,14 +48,27 @@ from .hits import Hits
 F32, I32 = np.float32, np.int32
 TS = 16                     # pixels a side of a tile: one float16 a tile row
 INITIAL_PAIRS = 1 << 16     # (triangle, tile) list slots first allocated; grown on demand
-SETUP_LANES = 16            # triangles a work-item of ndrf_raster_setup (-D LANES)
 TRI_WORDS = 16              # 32-bit words of a triangle's setup record (-D TRI_WORDS)
+SCAN_ITEMS = 256            # work-items of the tile scan's one work-group, at most
+GPU_LAYOUT = {"rows": 1, "lanes": 1}   # device_layout on GPUs
 
 
-def rows_per_item(device: cl.Device) -> int:
-    """Tile rows a work-item covers on ``device``: a whole tile on CPUs (its triangle list
-    read once), one row on GPUs (parallelism from the work-items)."""
-    return 1 if device_type_name(device) == "GPU" else TS
+def device_layout(device: cl.Device) -> dict:
+    """How the rasteriser is organised on ``device``: ``rows``, the tile rows a tile
+    work-item covers (-D TROWS), and ``lanes``, the triangles a setup work-item takes, one a
+    vector lane (-D LANES). CPUs: a whole tile (its triangle list read once) and 16 lanes
+    (PoCL vectorises within a work-item, not across them); GPUs (:data:`GPU_LAYOUT`): one
+    row and one triangle, parallelism from the work-items."""
+    if device_type_name(device) == "GPU":
+        return dict(GPU_LAYOUT)
+    return {"rows": TS, "lanes": 16}
+
+
+def scan_items(kernel: cl.Kernel, device: cl.Device) -> int:
+    """Work-items of the tile scan's one work-group on ``device``: :data:`SCAN_ITEMS`, or
+    fewer where the kernel's work-group size or the local memory (an int each) is smaller."""
+    limit = kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, device)
+    return max(1, min(SCAN_ITEMS, int(limit), int(device.local_mem_size) // 4))
 
 
 def packed_geometry(meshes) -> dict:
@@ -128,24 +143,30 @@ class Rasteriser:
         meshes: an :class:`clrender.ndrf.baked.NDRFModel` (validated by its loader) or
             ``[(vertices (V, 3), faces (F, 3)), ...]``; a mesh may have no face.
         device: OpenCL device spec or :class:`clrender.device.Runtime`.
-        rows: tile rows a work-item covers (a divisor of TS); None: :func:`rows_per_item`.
+        rows: tile rows a work-item covers (a divisor of TS); None: :func:`device_layout`.
+        lanes: triangles a setup work-item takes (1 or 16); None: :func:`device_layout`.
             Every layout gives the same hits, bit for bit.
     """
 
-    KERNELS = ("ndrf_raster_clear", "ndrf_raster_setup", "ndrf_raster_scan", "ndrf_raster_bin",
-               "ndrf_raster_tile")
+    KERNELS = ("ndrf_raster_setup", "ndrf_raster_scan", "ndrf_raster_bin", "ndrf_raster_tile")
 
-    def __init__(self, meshes, device=None, rows: int | None = None):
+    def __init__(self, meshes, device=None, rows: int | None = None,
+                 lanes: int | None = None):
         if hasattr(meshes, "mesh"):
             meshes = [meshes.mesh(k)[:2] for k in range(meshes.config.K)]
         self.runtime = rt = get_runtime(device)
         self.K = len(meshes)
-        self.rows = rows_per_item(rt.device) if rows is None else int(rows)
+        layout = device_layout(rt.device)
+        self.rows = layout["rows"] if rows is None else int(rows)
+        self.lanes = layout["lanes"] if lanes is None else int(lanes)
         if self.rows < 1 or TS % self.rows:
             raise ValueError(f"rows={rows}: must divide the tile side {TS}")
+        if self.lanes not in (1, 16):
+            raise ValueError(f"lanes={lanes}: the setup takes 1 or 16 triangles a work-item")
         program = rt.program("ndrf_raster.cl", {"K": self.K, "TS": TS, "TROWS": self.rows,
-                                                "LANES": SETUP_LANES, "TRI_WORDS": TRI_WORDS})
+                                                "LANES": self.lanes, "TRI_WORDS": TRI_WORDS})
         self._kernels = {n: program.kernel(n) for n in self.KERNELS}
+        self._scan_items = scan_items(self._kernels["ndrf_raster_scan"], rt.device)
         meshes, orders = zip(*[spatially_ordered(v, f) for v, f in meshes])
         geometry = packed_geometry(meshes)
         geometry["face_ids"] = np.concatenate(orders)
@@ -172,9 +193,28 @@ class Rasteriser:
         self._local: dict = {}
 
     @property
+    def kernels(self) -> dict:
+        """``{kernel name: cl.Kernel}`` of the program."""
+        return dict(self._kernels)
+
+    def launch_sizes(self, width: int, height: int) -> list[tuple[str, tuple[int, ...]]]:
+        """The kernel launches of a ``width`` x ``height`` frame, in order (a frame binned
+        again after an overflow repeats the last two): ``(kernel name, global work-items
+        per axis before padding to the work-group size)``: setup one per :attr:`lanes`
+        faces, scan one work-group (:func:`scan_items`), bin one a face, tile one per
+        :attr:`rows` rows of a tile."""
+        tiles_x, tiles_y, faces = -(-width // TS), -(-height // TS), max(self.n_faces, 1)
+        return [("ndrf_raster_setup", (-(-faces // self.lanes),)),
+                ("ndrf_raster_scan", (self._scan_items,)),
+                ("ndrf_raster_bin", (faces,)),
+                ("ndrf_raster_tile", (tiles_x, tiles_y * (TS // self.rows)))]
+
+    @property
     def mode(self) -> str:
-        """The layout, e.g. "16x16 tiles, 16 rows a work-item"."""
-        return f"{TS}x{TS} tiles, {self.rows} row{'s' if self.rows > 1 else ''} a work-item"
+        """The layout, e.g. "16x16 tiles, 16 rows a work-item, 16 triangles a setup
+        work-item"."""
+        return (f"{TS}x{TS} tiles, {self.rows} row{'s' if self.rows > 1 else ''} a work-item, "
+                f"{self.lanes} triangle{'s' if self.lanes > 1 else ''} a setup work-item")
 
     @property
     def capacity(self) -> int:
@@ -200,7 +240,10 @@ class Rasteriser:
             self._bufs = {"cam": cl.Buffer(ctx, mf.READ_ONLY, CAM_BYTES),
                           "ray_ab": cl.Buffer(ctx, mf.READ_ONLY,
                                               4 * (-(-width // TS) * TS + height)),
-                          "tile_count": cl.Buffer(ctx, mf.READ_WRITE, 4 * n_tiles),
+                          # 0 between frames: the scan zeroes what the setup counted
+                          "tile_count": cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR,
+                                                  hostbuf=np.zeros(n_tiles, I32)),
+                          "cursor": cl.Buffer(ctx, mf.READ_WRITE, 4 * n_tiles),
                           "tile_start": cl.Buffer(ctx, mf.READ_WRITE, 4 * (n_tiles + 1))}
             self._bufs.update({name: cl.Buffer(ctx, mf.READ_WRITE, max(nbytes, 4))
                                for name, nbytes in sizes.items()})
@@ -243,14 +286,16 @@ class Rasteriser:
         self._uploads = [cl.enqueue_copy(q, b["cam"], camera.packed(), is_blocking=False),
                          cl.enqueue_copy(q, b["ray_ab"], pixel_ray_ab(camera),
                                          is_blocking=False)]
-        n_tiles, faces = np.int32(self._n_tiles), max(self.n_faces, 1)
+        n_tiles = np.int32(self._n_tiles)
+        size = dict(self.launch_sizes(camera.width, camera.height))
+        scan = size["ndrf_raster_scan"]
         self._events = [
-            self._run("ndrf_raster_clear", (int(n_tiles),), n_tiles, b["tile_count"]),
-            self._run("ndrf_raster_setup", (-(-faces // SETUP_LANES),), b["cam"], w, h,
+            self._run("ndrf_raster_setup", size["ndrf_raster_setup"], b["cam"], w, h,
                       np.int32(self.n_faces), g["face_start"], g["faces"], g["face_ids"],
                       g["vertices"], b["ray_ab"], s["tri_geo"], s["tri_box"], b["tile_count"]),
-            self._kernels["ndrf_raster_scan"](q, (1,), (1,), n_tiles, b["tile_count"],
-                                              b["tile_start"])]
+            self._kernels["ndrf_raster_scan"](q, scan, scan, n_tiles, b["tile_count"],
+                                              b["tile_start"], b["cursor"],
+                                              cl.LocalMemory(4 * scan[0]))]
         self._total_read = cl.enqueue_copy(q, self._total, b["tile_start"],
                                            src_offset=4 * int(n_tiles), is_blocking=False)
         self._events += self._bin_and_tile()
@@ -260,12 +305,12 @@ class Rasteriser:
         """Enqueue the bin and tile passes of the current frame into the current list."""
         b, s, (width, height) = self._bufs, self._setup, self._size
         w, h, capacity = np.int32(width), np.int32(height), np.int32(self._capacity)
-        tiles_x, tiles_y = -(-width // TS), -(-height // TS)
+        size = dict(self.launch_sizes(width, height))
         return [
-            self._run("ndrf_raster_bin", (max(self.n_faces, 1),), w, np.int32(self.n_faces),
-                      b["ray_ab"], s["tri_geo"], s["tri_box"], b["tile_count"], capacity,
+            self._run("ndrf_raster_bin", size["ndrf_raster_bin"], w, np.int32(self.n_faces),
+                      b["ray_ab"], s["tri_geo"], s["tri_box"], b["cursor"], capacity,
                       self._list_buf),
-            self._run("ndrf_raster_tile", (tiles_x, tiles_y * (TS // self.rows)), w, h,
+            self._run("ndrf_raster_tile", size["ndrf_raster_tile"], w, h,
                       b["ray_ab"], s["tri_geo"], b["tile_start"], capacity, self._list_buf,
                       b["tri"], b["bary"], b["depth"])]
 
@@ -283,7 +328,7 @@ class Rasteriser:
         self._list(self.binned_pairs)
         b = self._bufs
         # The bin pass advanced each tile's cursor to its end: back to its start.
-        self._events.append(cl.enqueue_copy(self.runtime.queue, b["tile_count"],
+        self._events.append(cl.enqueue_copy(self.runtime.queue, b["cursor"],
                                             b["tile_start"], byte_count=4 * self._n_tiles))
         self._events += self._bin_and_tile()
         return True

@@ -55,8 +55,8 @@ class Renderer:
 
     @property
     def hit_source(self) -> str:
-        """How hits are made, e.g. "raster (16x16 tiles, 16 rows a work-item)" or "embree
-        (host)"."""
+        """How hits are made, e.g. "raster (16x16 tiles, 16 rows a work-item, 16 triangles a
+        setup work-item)" or "embree (host)"."""
         return f"raster ({self.rasteriser.mode})" if self.hits == "raster" else "embree (host)"
 
     def _rasterised(self, camera, bg) -> tuple:

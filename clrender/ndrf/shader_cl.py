@@ -39,6 +39,7 @@ from .shader_ref import view_weights, vertex_projections
 F32, I32 = np.float32, np.int32
 KERNELS = ("ndrf_conv0", "ndrf_conv1", "ndrf_screen", "ndrf_zero_padding")
 VIEW_NODES = 1025     # nodes of the fast build's view table over [-1, 1]
+GPU_LAYOUT = {"H_VEC": 8, "SEG": 1, "ROWS": 1}   # device_layout on GPUs
 
 
 def _round_up(n: int, m: int) -> int:
@@ -55,7 +56,7 @@ def device_layout(device: cl.Device) -> dict:
     per work-item, parallelism from the work-items themselves.
     """
     if device_type_name(device) == "GPU":
-        return {"H_VEC": 8, "SEG": 1, "ROWS": 1}
+        return dict(GPU_LAYOUT)
     return {"H_VEC": 16 if device.preferred_vector_width_float >= 16 else 8, "SEG": 8,
             "ROWS": 4}
 
@@ -118,14 +119,16 @@ class Shader:
             ``$CLRENDER_DEVICE``).
         exact: the exact build (``Runtime.program(exact=True)``, held to the numpy
             reference in tests); default the fast build (the view table, native exp).
+        layout: conv0's organisation (``H_VEC``, ``SEG``, ``ROWS``); None:
+            :func:`device_layout` of the device.
     """
 
-    def __init__(self, model, device=None, exact: bool = False):
+    def __init__(self, model, device=None, exact: bool = False, layout: dict | None = None):
         validate(model, "Shader model")
         self.model, self.config = model, model.config
         self.runtime = rt = get_runtime(device)
         self.exact = bool(exact)
-        layout = device_layout(rt.device)
+        layout = device_layout(rt.device) if layout is None else layout
         self.defines = kernel_defines(self.config, layout["H_VEC"], layout["SEG"],
                                       layout["ROWS"])
         program = rt.program("ndrf_shade.cl", self.defines, self.exact)
@@ -150,6 +153,32 @@ class Shader:
         fits = self.runtime.device.max_mem_alloc_size // row_bytes - pad
         return int(max(1, min(height, fits)))
 
+    @property
+    def kernels(self) -> dict:
+        """``{kernel name: cl.Kernel}`` of the program."""
+        return dict(self._kernels)
+
+    def launch_sizes(self, width: int, height: int) -> list[tuple[str, tuple[int, int]]]:
+        """The kernel launches of a ``width`` x ``height`` frame, in order: the hidden
+        band's padding zeroed (once per image size; every frame where the image takes
+        several bands), then conv0 and conv1 per band of :meth:`band_rows` rows:
+        ``(kernel name, global work-items (x, y) before padding to the work-group size)``."""
+        band = self.band_rows(width, height)
+        out = [("ndrf_zero_padding", self._padding_size(width, band))]
+        for y in range(0, height, band):
+            out += list(self._band_sizes(width, y, min(y + band, height)).items())
+        return out
+
+    def _padding_size(self, width: int, band: int) -> tuple[int, int]:
+        r = self.defines["KSIZE"] - 1
+        return (width + r, band + r)
+
+    def _band_sizes(self, width: int, y: int, end: int) -> dict:
+        """Work-items of conv0 and conv1 for the band of rows [y, end)."""
+        seg, rows, pad = self.defines["SEG"], self.defines["ROWS"], self.defines["KSIZE"] - 1
+        return {"ndrf_conv0": (-(-width // seg), -(-(end - max(y - pad, 0)) // rows)),
+                "ndrf_conv1": (width, end - y)}
+
     def _frame_buffers(self, width: int, height: int) -> dict:
         """Per-size buffers, re-allocated only when the image size changes: the camera, one
         band of the hidden layer (its padding columns zeroed here, never written by the
@@ -169,9 +198,9 @@ class Shader:
         return self._bufs
 
     def _zero_padding(self, width: int, top_rows: bool) -> cl.Event:
-        r = self.defines["KSIZE"] - 1
-        return self._run("ndrf_zero_padding", width + r, self._band + r, np.int32(width),
-                         np.int32(self._band), np.int32(top_rows), self._bufs["hidden"])
+        return self._run("ndrf_zero_padding", *self._padding_size(width, self._band),
+                         np.int32(width), np.int32(self._band), np.int32(top_rows),
+                         self._bufs["hidden"])
 
     def _allocate(self, width: int, height: int, sizes: dict) -> dict:
         """``{name: device buffer}`` of ``sizes`` bytes, each checked against the device's
@@ -249,18 +278,18 @@ class Shader:
         # the copy if dropped) is held until the frame's read.
         upload = cl.enqueue_copy(q, b["cam"], camera.packed(), is_blocking=False)
         frame = self._frame_args(camera, tri_buf, bary_buf)
-        seg, rows, pad = self.defines["SEG"], self.defines["ROWS"], self.defines["KSIZE"] - 1
         events = {"ms_conv0": [], "ms_conv1": []}
         for y in range(0, h, self._band):
             end = min(y + self._band, h)
             if y == 0 and self._band < h:   # the last frame's later bands wrote the top rows
                 events["ms_conv0"].append(self._zero_padding(w, top_rows=True))
-            band = (np.int32(y), np.int32(end))
+            band, size = (np.int32(y), np.int32(end)), self._band_sizes(w, y, end)
             events["ms_conv0"].append(self._run(
-                "ndrf_conv0", -(-w // seg), -(-(end - max(y - pad, 0)) // rows), *frame,
-                m["proj"], m["w_view"], m["b0"], *band, b["hidden"]))
-            events["ms_conv1"].append(self._run("ndrf_conv1", w, end - y, *frame, b["hidden"],
-                                                m["w1"], m["b1"], *bg, *band, b["rgb"]))
+                "ndrf_conv0", *size["ndrf_conv0"], *frame, m["proj"], m["w_view"], m["b0"],
+                *band, b["hidden"]))
+            events["ms_conv1"].append(self._run("ndrf_conv1", *size["ndrf_conv1"], *frame,
+                                                b["hidden"], m["w1"], m["b1"], *bg, *band,
+                                                b["rgb"]))
         rgb = np.empty((h, w, 3), F32)
         cl.enqueue_copy(q, rgb, b["rgb"])
         del upload

@@ -32,6 +32,11 @@ F32 = np.float32
 DEFERRED_PARAMS = ("deferred_w0", "deferred_b0", "deferred_w1", "deferred_b1",
                    "deferred_w2", "deferred_b2")
 LANE_WIDTHS = (1, 2, 4, 8, 16)      # vector widths OpenCL C has
+# The deferred MLP's [w0, b0, w1, b1, w2, b2]: 7 features + SH_DIM in, 3 colours out.
+DEFERRED_SHAPES = ((7 + SH_DIM, DEFERRED_HIDDEN), (DEFERRED_HIDDEN,),
+                   (DEFERRED_HIDDEN, DEFERRED_HIDDEN), (DEFERRED_HIDDEN,),
+                   (DEFERRED_HIDDEN, 3), (3,))
+DEFERRED_CONSTANT_ARGS = 1          # __constant arguments of ngprt_deferred: its weights
 
 
 def lane_width(device, cap: int = 16) -> int:
@@ -62,14 +67,27 @@ def march_constants() -> dict:
     return out
 
 
+def deferred_in_constant(device) -> bool:
+    """Whether the deferred MLP's weights (:data:`DEFERRED_SHAPES`, float32) go to
+    ``__constant`` memory on ``device`` (``-D DEFERRED_CONSTANT``): they fit its
+    CL_DEVICE_MAX_CONSTANT_BUFFER_SIZE and the kernel's constant arguments its
+    CL_DEVICE_MAX_CONSTANT_ARGS."""
+    nbytes = 4 * sum(int(np.prod(shape)) for shape in DEFERRED_SHAPES)
+    return (nbytes <= device.max_constant_buffer_size
+            and DEFERRED_CONSTANT_ARGS <= device.max_constant_args)
+
+
 def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1,
-                   march: str = "ours", count_reads: bool = False) -> tuple[dict, dict]:
+                   march: str = "ours", count_reads: bool = False,
+                   deferred_constant: bool = False) -> tuple[dict, dict]:
     """The ``-D`` defines of the march and deferred programs for a model config: the
     shared constants of :func:`clrender.ngprt.config.kernel_constants` and
     :func:`march_constants` (the kernels define none of their own) plus the model's
     sizes, variant and scene, the lanes per work-item (``rays`` for the march,
-    ``deferred_vec`` for the deferred MLP), the march (:mod:`clrender.ngprt.marches`)
-    and whether the march counts its reads (``COUNT_READS``, the counting build)."""
+    ``deferred_vec`` for the deferred MLP), the march (:mod:`clrender.ngprt.marches`),
+    whether the march counts its reads (``COUNT_READS``, the counting build) and whether
+    the deferred MLP reads its weights from ``__constant`` memory
+    (``DEFERRED_CONSTANT``: :func:`deferred_in_constant`)."""
     shared = kernel_constants()
     march = {
         **shared, **march_constants(), "L": config.L, "L_C": config.L_C,
@@ -80,7 +98,8 @@ def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1,
         "N_INV": config.n_inv_attention, "RAYS": rays, "G_IN_CODE": g_in_codes(config),
         "MARCH_PAPER": check_march(march) == "paper", "COUNT_READS": bool(count_reads),
     }
-    return march, {**shared, "DEFERRED_VEC": deferred_vec}
+    return march, {**shared, "DEFERRED_VEC": deferred_vec,
+                   "DEFERRED_CONSTANT": bool(deferred_constant)}
 
 
 def _packed(arrays: dict, names, shapes) -> np.ndarray:
@@ -106,10 +125,9 @@ def fusion_params(model) -> np.ndarray:
 
 
 def deferred_params(model) -> np.ndarray:
-    """The deferred MLP's weights packed as [w0, b0, w1, b1, w2, b2] (float32)."""
-    n_in, h = 7 + SH_DIM, DEFERRED_HIDDEN
-    return _packed(model.arrays, DEFERRED_PARAMS,
-                   ((n_in, h), (h,), (h, h), (h,), (h, 3), (3,)))
+    """The deferred MLP's weights packed as [w0, b0, w1, b1, w2, b2] (float32), shapes
+    :data:`DEFERRED_SHAPES`."""
+    return _packed(model.arrays, DEFERRED_PARAMS, DEFERRED_SHAPES)
 
 
 def exit_codes(model, use_G: bool = True) -> np.ndarray:
@@ -193,8 +211,10 @@ class Renderer:
         self.runtime = rt = get_runtime(device)
         self.rays = rays or lane_width(rt.device)
         self.deferred_vec = deferred_vec or lane_width(rt.device)
+        self.deferred_constant = deferred_in_constant(rt.device)
         march_defs, deferred_defs = kernel_defines(self.config, self.use_G, self.deferred_vec,
-                                                   self.rays, self.march_kind)
+                                                   self.rays, self.march_kind,
+                                                   deferred_constant=self.deferred_constant)
         self._march = rt.program("ngprt_march.cl", march_defs, exact,
                                  kernel_dir).kernel("ngprt_march")
         self._counting = None
@@ -204,6 +224,17 @@ class Renderer:
         self._local = {}
         self._cam_upload = None
         self._upload()
+
+    @property
+    def kernels(self) -> dict:
+        """``{kernel name: cl.Kernel}`` of the timed builds."""
+        return {"ngprt_march": self._march, "ngprt_deferred": self._deferred}
+
+    def launch_sizes(self, width: int, height: int) -> list[tuple[str, tuple[int, ...]]]:
+        """The kernel launches of a ``width`` x ``height`` frame, in order: ``(kernel
+        name, global work-items per axis before padding to the work-group size)``."""
+        return [("ngprt_march", (-(-width // self.rays), height)),
+                ("ngprt_deferred", (-(-width * height // self.deferred_vec),))]
 
     def _launch(self, name: str, kernel, global_size: tuple[int, ...]):
         """(padded global size, local size) of a kernel launch, derived from the device
@@ -283,8 +314,8 @@ class Renderer:
     def _enqueue_march(self, camera, out, counted: bool = False) -> cl.Event:
         cfg, b = self.config, self._bufs
         kernel = self._counting_kernel() if counted else self._march
-        gsize, local = self._launch("count" if counted else "march", kernel,
-                                    (-(-camera.width // self.rays), camera.height))
+        size = dict(self.launch_sizes(camera.width, camera.height))["ngprt_march"]
+        gsize, local = self._launch("count" if counted else "march", kernel, size)
         return kernel(
             self.runtime.queue, gsize, local, out["cam"], np.int32(camera.width),
             np.int32(camera.height), self.step, F32(cfg.near), F32(cfg.far), b["occ"], b["G"],
@@ -337,7 +368,8 @@ class Renderer:
         counted = stats and self.count_reads
         ev_march = self._enqueue_march(camera, out, counted)
         bg = [F32(c) for c in (background if background is not None else (1.0, 1.0, 1.0))]
-        gsize, local = self._launch("deferred", self._deferred, (-(-n // self.deferred_vec),))
+        size = dict(self.launch_sizes(w, h))["ngprt_deferred"]
+        gsize, local = self._launch("deferred", self._deferred, size)
         ev_deferred = self._deferred(self.runtime.queue, gsize, local,
                                      out["cam"], np.int32(w), np.int32(n), out["feat"],
                                      self._bufs["deferred"], *bg, out["rgb"])
