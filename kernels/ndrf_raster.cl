@@ -199,12 +199,15 @@ inline void for_each_tile(int g, const float *c, int4 b, int width,
  * tri_box, and each counted in its tiles (tile_count). A triangle that cannot cover a pixel
  * (degenerate, behind the camera, off screen, or between pixel centres) gets bounds
  * x0 > x1. */
-__kernel void ndrf_raster_setup(__global const float *cam, const int width, const int height,
-                                const int n_faces, __global const int *face_start,
-                                __global const int *faces, __global const int *face_ids,
-                                __global const float *vertices, __global const float *ray_ab,
-                                __global float *tri_geo, __global int *tri_box,
-                                volatile __global int *tile_count)
+/* vec_type_hint: the lanes are explicit (LANES triangles a work-item); Intel's CPU
+ * compiler keeps them (ngprt_march.cl says why). */
+__kernel __attribute__((vec_type_hint(lfloat)))
+void ndrf_raster_setup(__global const float *cam, const int width, const int height,
+                       const int n_faces, __global const int *face_start,
+                       __global const int *faces, __global const int *face_ids,
+                       __global const float *vertices, __global const float *ray_ab,
+                       __global float *tri_geo, __global int *tri_box,
+                       volatile __global int *tile_count)
 {
     const int g0 = (int)get_global_id(0) * LANES;
     if (g0 >= n_faces) return;

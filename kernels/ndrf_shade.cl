@@ -40,10 +40,16 @@
  * Speed: conv0 vectorises across output channels; a work-item prepares the
  * (SEG + PAD) x (ROWS + PAD) input pixels of its block once (hits, ray direction).
  * Plain a * b + c: mad()/fma() are several times slower on PoCL (docs/performance.md,
- * "PoCL facts the kernels rely on").
+ * "PoCL facts the kernels rely on"); the fast build turns contraction on, so they become
+ * fused multiply-adds (PoCL does not contract under FP_CONTRACT OFF, even with
+ * -cl-mad-enable).
  */
 #include "camera.h"
+#if FAST_MATH
+#pragma OPENCL FP_CONTRACT ON
+#else
 #pragma OPENCL FP_CONTRACT OFF
+#endif
 
 #if !defined(K) || !defined(FEATURES) || !defined(C_IN) || !defined(HIDDEN) || \
     !defined(N_FREQ) || !defined(KSIZE) || !defined(H_VEC) || !defined(H_STRIDE) || \

@@ -125,18 +125,22 @@ inline void ngp_write_pixel(const v_rays *r, int j, int n, __global float *feat,
     n_occ[n] = LANE_I(r->n_occ, j);
 }
 
-__kernel void ngprt_march(__global const float *cam, const int width, const int height,
-                          const float s, const float near, const float far,
-                          __global const occ_t *occupancy, __global const uchar *G,
-                          __global const int *block_index, __global const float8 *blocks,
-                          const int n_blocks, __global const float8 *tables,
-                          __global const float *fusion,
-                          __global float *feat, __global float *depth,
-                          __global int *n_march_out, __global int *n_occ_out
+/* vec_type_hint: the lanes are explicit (RAYS rays a work-item). Without it Intel's CPU
+ * compiler scalarises the vectors and re-vectorises across work-items, 10-16x slower
+ * at 16 lanes (docs/performance.md, "Speed side by side"); other compilers ignore it. */
+__kernel __attribute__((vec_type_hint(vfloat)))
+void ngprt_march(__global const float *cam, const int width, const int height,
+                 const float s, const float near, const float far,
+                 __global const occ_t *occupancy, __global const uchar *G,
+                 __global const int *block_index, __global const float8 *blocks,
+                 const int n_blocks, __global const float8 *tables,
+                 __global const float *fusion,
+                 __global float *feat, __global float *depth,
+                 __global int *n_march_out, __global int *n_occ_out
 #if COUNT_READS
-                          , __global int *reads_out
+                 , __global int *reads_out
 #endif
-                          )
+                 )
 {
     const int px0 = (int)get_global_id(0) * RAYS, py = get_global_id(1);
     if (px0 >= width || py >= height) return;
