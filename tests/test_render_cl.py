@@ -96,6 +96,22 @@ def test_deferred_weights_in_constant_only_where_they_fit():
                                                               max_constant_args=0))
 
 
+def test_lane_width_is_a_cpus_native_width_and_a_gpus_preferred_one():
+    import pyopencl as cl
+
+    def device(kind, preferred, native):
+        return SimpleNamespace(type=getattr(cl.device_type, kind),
+                               preferred_vector_width_float=preferred,
+                               native_vector_width_float=native)
+    assert render_cl.lane_width(device("CPU", 1, 16)) == 16   # Intel's CPU runtime
+    assert render_cl.lane_width(device("CPU", 16, 16)) == 16  # PoCL, AVX-512
+    assert render_cl.lane_width(device("CPU", 1, 8)) == 8     # AVX2
+    assert render_cl.lane_width(device("CPU", 1, 16), cap=4) == 4
+    assert render_cl.lane_width(device("CPU", 1, 6)) == 4     # rounded down to a vector width
+    assert render_cl.lane_width(device("GPU", 1, 1)) == 1
+    assert render_cl.lane_width(device("GPU", 1, 4)) == 1
+
+
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
 def test_distance_grid_read_from_G_matches_reference(scene, cl_platform):
     # L_C / G_res = 3 is no power of two: the kernel reads G itself instead of from the
