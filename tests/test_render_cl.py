@@ -24,6 +24,8 @@ from clrender.ngprt.render_cl import Renderer
 from clrender.ngprt.render_ref import march_reference, render_reference
 from clrender.paths import path_cameras
 
+import pyopencl as cl  # after clrender, which registers the ICDs first (clrender/icd.py)
+
 SIZE = 32
 BACKGROUND = (1.0, 0.5, 0.25)
 CORNER_SPHERES = [("sphere", 0.75 * np.array(c, float), np.full(3, 0.12))
@@ -97,8 +99,6 @@ def test_deferred_weights_in_constant_only_where_they_fit():
 
 
 def test_lane_width_is_a_cpus_native_width_and_a_gpus_preferred_one():
-    import pyopencl as cl
-
     def device(kind, preferred, native):
         return SimpleNamespace(type=getattr(cl.device_type, kind),
                                preferred_vector_width_float=preferred,
