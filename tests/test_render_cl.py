@@ -14,6 +14,7 @@ import itertools
 from types import SimpleNamespace
 
 import numpy as np
+import pyopencl as cl
 import pytest
 
 from clrender.camera import generate_rays
@@ -23,8 +24,6 @@ from clrender.ngprt import render_cl
 from clrender.ngprt.render_cl import Renderer
 from clrender.ngprt.render_ref import march_reference, render_reference
 from clrender.paths import path_cameras
-
-import pyopencl as cl  # after clrender, which registers the ICDs first (clrender/icd.py)
 
 SIZE = 32
 BACKGROUND = (1.0, 0.5, 0.25)
