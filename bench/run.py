@@ -117,10 +117,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--downscale", type=int, default=1, metavar="N",
                    help="of a --scene folder: read its images_N/, else shrink its images N "
                         "times (default 1)")
-    p.add_argument("--option", default=None, metavar="NAME=V1,V2",
+    p.add_argument("--option", action="append", default=None, metavar="NAME=V1,V2",
                    help=f"{train_curve.KEY}: a curve for each value of one of the method's "
                         f"training options (e.g. engine=torch,fast), compared with the first "
-                        f"at equal steps when --seeds >= 2")
+                        f"at equal steps when --seeds >= 2; repeated, options of one value "
+                        f"hold for every curve (--option L=4 --option variant=separate-v,sum)")
     p.add_argument("--test-stride", type=whole_number("test stride"), default=1, metavar="K",
                    help=f"{train_curve.KEY}: score every K-th test view (default 1: all)")
     p.add_argument("--points", type=whole_number("points"), default=train_curve.N_POINTS,

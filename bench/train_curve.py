@@ -3,6 +3,7 @@
     python -m bench.run train-curve                        # NGP-RT, `cpu` and `tiny` presets
     python -m bench.run train-curve --method ndrf --preset tiny --out results/
     python -m bench.run train-curve --preset cpu --option engine=torch,fast --seeds 3
+    python -m bench.run train-curve --preset cpu-long --option L=4 --option variant=separate-v,sum
     python -m bench.run train-curve --preset cpu --scene data/lego --downscale 4 --test-stride 2
 
 Trains the baseline row of the method's ``CURVE_TABLE`` (NGP-RT: Table 2's separate-v,
@@ -15,7 +16,9 @@ evaluation's time is recorded beside it. A method with a teacher (NDRF) has it t
 taken from the model cache) first, and the teacher's test PSNR is drawn as a horizontal
 line. ``--option NAME=V1,V2,..`` draws a curve for each value of one of the method's
 training options (e.g. NGP-RT's ``engine``), each trained for the same steps and evaluated
-after the same ones; with ``--seeds N`` >= 2 each value after the first is compared with
+after the same ones; more ``--option NAME=V`` of one value each set an option for every
+curve (``--option L=4 --option variant=separate-v,sum``: Table 3's comparison along a
+run); with ``--seeds N`` >= 2 each value after the first is compared with
 the first at every evaluated step, paired by seed: the mean test-PSNR difference and its
 95% t interval (:mod:`bench.seeds`). ``--downscale`` reads a dataset folder as the tables
 do, ``--test-stride K`` scores every K-th test view (the first included), ``--points N``
@@ -131,6 +134,30 @@ def option_values(method: str, text: str) -> tuple[str, list]:
             raise ValueError(f"--option {text!r}: {v!r} is not a {opt.type.__name__}") from None
         opt.check(name, out[-1])
     return name, out
+
+
+def curve_options(method: str, texts) -> list[dict | None]:
+    """The training options of each curve from the ``--option`` texts (``NAME=V1,V2,..``,
+    :func:`option_values`): an option of one value holds for every curve, the one option
+    of several values (at most one) gives a curve per value; ``[None]`` without options.
+    ValueError on a repeated name or on two options of several values."""
+    if not texts:
+        return [None]
+    fixed, varied = {}, None
+    for text in texts:
+        name, values = option_values(method, text)
+        if name in fixed or (varied and name == varied[0]):
+            raise ValueError(f"--option {name} is given twice")
+        if len(values) == 1:
+            fixed[name] = values[0]
+        elif varied is None:
+            varied = (name, values)
+        else:
+            raise ValueError(f"--option {text!r}: only one option may take several values "
+                             f"({varied[0]} does)")
+    if varied is None:
+        return [fixed]
+    return [{**fixed, varied[0]: v} for v in varied[1]]
 
 
 def test_views(data: Path, downscale: int = 1, stride: int = 1):
@@ -260,9 +287,10 @@ def write_curve(out_dir: Path, points: list[dict], meta: dict) -> str:
                          _cell(p["train_psnr"]), _cell(p["teacher_test_psnr"])])
     write_atomic(Path(out_dir) / f"{KEY}.csv", buf.getvalue())
     write_atomic(Path(out_dir) / f"{KEY}.png", _plot(points, meta))
-    lines = [f"{'preset':8s} {'option':13s} {'seed':>4s} {'step':>6s} {'train min':>9s} "
+    w = max([13] + [len(p.get("option", "")) for p in points])
+    lines = [f"{'preset':8s} {'option':{w}s} {'seed':>4s} {'step':>6s} {'train min':>9s} "
              f"{'eval s':>7s} {'test PSNR':>9s} {'SSIM':>6s} {'train PSNR':>10s} {'teacher':>8s}"]
-    lines += [f"{p['preset']:8s} {p.get('option', ''):13s} {p['seed']:4d} {p['step']:6d} "
+    lines += [f"{p['preset']:8s} {p.get('option', ''):{w}s} {p['seed']:4d} {p['step']:6d} "
               f"{p['train_seconds'] / 60:9.2f} "
               f"{p['eval_seconds']:7.1f} {p['test_psnr']:9.2f} {p['test_ssim']:6.3f} "
               f"{_cell(p['train_psnr'], '{:10.2f}') or '       n/a'} "
@@ -314,19 +342,20 @@ def run(args, meta: dict) -> str:
     scene = args.scene or ablation.load_table(methods.get(args.method).CURVE_TABLE).scene
     data = cache.resolve_scene(scene, args.cache)
     fingerprint = cache.data_fingerprint(data, args.downscale)
-    name, values = option_values(args.method, args.option) if args.option else (None, [None])
+    curves = curve_options(args.method, args.option)
+    name = row.name if curves == [None] else f"{row.name} with the legend's options"
     meta = {**meta, "scene": scene if args.downscale == 1
             else f"{scene} (downscale {args.downscale})", "method": args.method,
-            "row": row.name if args.test_stride == 1
-            else f"{row.name}, every {args.test_stride}th test view"}
+            "row": name if args.test_stride == 1
+            else f"{name}, every {args.test_stride}th test view"}
     points, text = [], ""
     for preset in args.presets or PRESETS:
-        for value in values:
-            for seed in range(args.seed, args.seed + args.seeds):
+        # Seed outermost: a run cut short still holds whole pairs to compare.
+        for seed in range(args.seed, args.seed + args.seeds):
+            for option in curves:
                 points += measure_curve(args.cache, data, fingerprint, preset, seed=seed,
                                         device=args.device, torch_device=args.torch_device,
-                                        method=args.method,
-                                        option=None if name is None else {name: value},
+                                        method=args.method, option=option,
                                         downscale=args.downscale, test_stride=args.test_stride,
                                         n_points=args.points, iterations=args.iterations)
                 text = write_curve(args.out, points, meta)

@@ -77,11 +77,11 @@ def test_option_values_seeds_downscale_and_stride_reach_every_curve(tmp_path, mo
                      "--iterations", "50", "--scene", str(tmp_path / "scene"),
                      "--cache", str(tmp_path / "cache"),
                      "--out", str(out)]) == 0
-    assert calls == [("tiny", {"engine": e}, s, 2, 3, 4, 50) for e in ("torch", "fast")
-                     for s in (0, 1)]
+    assert calls == [("tiny", {"engine": e}, s, 2, 3, 4, 50) for s in (0, 1)
+                     for e in ("torch", "fast")]
     rows = list(csv.DictReader((out / "train-curve.csv").open()))
     assert [(r["option"], r["seed"]) for r in rows][::2] == \
-        [("engine=torch", "0"), ("engine=torch", "1"), ("engine=fast", "0"), ("engine=fast", "1")]
+        [("engine=torch", "0"), ("engine=fast", "0"), ("engine=torch", "1"), ("engine=fast", "1")]
     text = capsys.readouterr().out
     # differences 0.5 and 0.6 dB: mean 0.55, std 0.0707, t(0.975, 1) = 12.706: +- 0.635
     assert "engine=fast - engine=torch step      0: +0.55 dB [-0.09, +1.19] (n = 2), 0 inside" in text
@@ -99,6 +99,20 @@ def test_option_values_refuse_what_the_method_does_not_take(text, message):
     with pytest.raises(ValueError, match=message):
         train_curve.option_values("ngprt", text)
     assert train_curve.option_values("ngprt", "L=2,3") == ("L", [2, 3])
+
+
+def test_curve_options_fix_single_values_and_vary_one_option():
+    """`--option L=4 --option variant=separate-v,sum`: L = 4 on both curves, one curve per
+    variant; without options one curve of the row's own; two varied options or a repeated
+    name are refused."""
+    assert train_curve.curve_options("ngprt", None) == [None]
+    assert train_curve.curve_options("ngprt", ["L=4", "variant=separate-v,sum"]) == [
+        {"L": 4, "variant": "separate-v"}, {"L": 4, "variant": "sum"}]
+    assert train_curve.curve_options("ngprt", ["L=3"]) == [{"L": 3}]
+    with pytest.raises(ValueError, match="only one option"):
+        train_curve.curve_options("ngprt", ["L=2,4", "variant=separate-v,sum"])
+    with pytest.raises(ValueError, match="given twice"):
+        train_curve.curve_options("ngprt", ["L=2", "L=4"])
 
 
 def test_test_stride_keeps_every_kth_view_from_the_first(tmp_path):
