@@ -1,6 +1,7 @@
 """How crowded a trained NGP-RT model's fine hash tables are: the collision load per level.
 
     python -m bench.ngprt_hash_load model.npz [more.npz ...]
+    python -m bench.ngprt_hash_load model.npz --log2-T 18     # the same space, 2^18 entries
 
 The attention of NGP-RT exists to disambiguate hash collisions (ngp-rt.md §3.2, S3.1):
 positions of different content that share a table entry. Training reaches every fine-grid
@@ -46,17 +47,18 @@ def occupied_vertices(occupancy_0: np.ndarray, split: int) -> int:
     return cells * m ** 3 + faces * m ** 2 + edges * m + corners
 
 
-def hash_load(model) -> list[dict]:
+def hash_load(model, T: int | None = None) -> list[dict]:
     """Per fine level of a baked NGP-RT model: ``{level, resolution, vertices, T, alpha,
     shared}``, ``shared`` the expected fraction of occupied vertices whose table entry
-    another occupied vertex also uses (uniform hash)."""
+    another occupied vertex also uses (uniform hash); ``T`` entries a table instead of the
+    model's (another preset's tables over the same occupied space)."""
     cfg, occ = model.config, model.arrays["occupancy_0"]
+    T = T or cfg.T
     rows = []
     for level, res in enumerate(cfg.fine_resolutions):
         n = occupied_vertices(occ, res // cfg.L_C)
-        rows.append({"level": level, "resolution": res, "vertices": n, "T": cfg.T,
-                     "alpha": n / cfg.T,
-                     "shared": -math.expm1((n - 1) * math.log1p(-1.0 / cfg.T))})
+        rows.append({"level": level, "resolution": res, "vertices": n, "T": T,
+                     "alpha": n / T, "shared": -math.expm1((n - 1) * math.log1p(-1.0 / T))})
     return rows
 
 
@@ -64,6 +66,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench.ngprt_hash_load", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("models", nargs="+", help="baked NGP-RT models (.npz)")
+    p.add_argument("--log2-T", type=int, default=None, metavar="N",
+                   help="count against 2^N entries a table instead of the model's")
     args = p.parse_args(argv)
     for path in args.models:
         model = load_baked(path)
@@ -72,7 +76,7 @@ def main(argv=None) -> int:
               f"{occ.size} coarse cells occupied ({np.count_nonzero(occ) / occ.size:.1%})")
         print(f"{'level':>5s} {'resolution':>10s} {'vertices':>12s} {'T':>9s} "
               f"{'alpha':>8s} {'shared':>7s}")
-        for r in hash_load(model):
+        for r in hash_load(model, None if args.log2_T is None else 1 << args.log2_T):
             print(f"{r['level']:5d} {r['resolution']:10d} {r['vertices']:12d} {r['T']:9d} "
                   f"{r['alpha']:8.2f} {r['shared']:7.1%}")
     return 0

@@ -39,3 +39,5 @@ def test_hash_load_per_level_of_a_model():
         assert r["vertices"] == n and r["alpha"] == pytest.approx(n / cfg.T)
         assert r["shared"] == pytest.approx(1 - (1 - 1 / cfg.T) ** (n - 1))
     assert rows[1]["vertices"] > rows[0]["vertices"]
+    half = hash_load(model, T=cfg.T // 2)
+    assert [r["alpha"] for r in half] == pytest.approx([2 * r["alpha"] for r in rows])
