@@ -4,8 +4,8 @@
     python -m bench.ngprt_hash_load model.npz --log2-T 18     # the same space, 2^18 entries
 
 The attention of NGP-RT exists to disambiguate hash collisions (ngp-rt.md §3.2, S3.1):
-positions of different content that share a table entry. Training reaches every fine-grid
-vertex of the occupied space, so a level's load is ``alpha = N / T``: the ``N`` distinct
+positions of different content that share a table entry. A sample in occupied space
+reads the corners of its fine cell, so a level's load is ``alpha = N / T``: the ``N`` distinct
 vertices of the level's grid (resolution ``L_C * 2^(l+1)``) on the closed occupied
 ``occupancy_0`` cells, over its ``T`` table entries. ``N`` is counted exactly from the
 occupied coarse cells and the faces, edges and corners they touch (a coarse cell split
