@@ -1,10 +1,10 @@
 """Time-to-quality curve: test PSNR of a method's deployed model against training minutes.
 
-    python -m bench.run train-curve                        # NGP-RT, `cpu` and `tiny` presets
-    python -m bench.run train-curve --method ndrf --preset tiny --out results/
-    python -m bench.run train-curve --preset cpu --option engine=torch,fast --seeds 3
-    python -m bench.run train-curve --preset cpu-long --option L=4 --option variant=separate-v,sum
-    python -m bench.run train-curve --preset cpu --scene data/lego --downscale 4 --test-stride 2
+    python -m bench.train_curve                        # NGP-RT, `cpu` and `tiny` presets
+    python -m bench.train_curve --method ndrf --preset tiny --out results/
+    python -m bench.train_curve --preset cpu --option engine=torch,fast --seeds 3
+    python -m bench.train_curve --preset cpu-long --option L=4 --option variant=separate-v,sum
+    python -m bench.train_curve --preset cpu --scene data/lego --downscale 4 --test-stride 2
 
 Trains the baseline row of the method's ``CURVE_TABLE`` (NGP-RT: Table 2's separate-v,
 L = 2; NDRF: the full model of its Table 3) from scratch into a fresh run folder
@@ -20,7 +20,7 @@ after the same ones; more ``--option NAME=V`` of one value each set an option fo
 curve (``--option L=4 --option variant=separate-v,sum``: Table 3's comparison along a
 run); with ``--seeds N`` >= 2 each value after the first is compared with
 the first at every evaluated step, paired by seed: the mean test-PSNR difference and its
-95% t interval (:mod:`bench.seeds`). ``--downscale`` reads a dataset folder as the tables
+95% t interval (:mod:`bench.tables.seeds`). ``--downscale`` reads a dataset folder as the tables
 do, ``--test-stride K`` scores every K-th test view (the first included), ``--points N``
 evaluates after about N steps instead of :data:`N_POINTS` (the first evaluations, of a
 model whose occupancy grid has not pruned empty space yet, are the slowest);
@@ -30,19 +30,24 @@ presets or engines whose steps take different times). Writes
 """
 from __future__ import annotations
 
+import argparse
 import csv
 import hashlib
 import io
 import json
 import shutil
+import sys
 import time
 from pathlib import Path
 
 from tqdm import tqdm
 
-from bench import ablation, cache
-from bench.fingerprint import code_fingerprint
+from bench import options
+from bench.modelcache import cache
+from bench.modelcache.fingerprint import code_fingerprint
+from bench.tables import ablation
 from clrender import methods
+from clrender.cliopts import whole_number
 from clrender.atomic import write_atomic
 
 KEY = "train-curve"
@@ -188,7 +193,7 @@ def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: i
     Args:
         root: the cache folder; the run goes to ``root/curves/<key>/run`` (emptied first);
             a teacher is taken from (or trained into) the model cache.
-        data, fingerprint: the dataset folder and :func:`bench.cache.data_fingerprint`
+        data, fingerprint: the dataset folder and :func:`bench.modelcache.cache.data_fingerprint`
             (of ``downscale``).
         iterations: override of the preset's iteration count (quick runs, tests).
         option: training options set over the row's (``{"engine": "fast"}``).
@@ -302,7 +307,7 @@ def compare_options(points: list[dict]) -> list[dict]:
     """Per preset, each ``option`` value after the first against the first at every step
     both evaluated, paired by seed (two or more): ``{preset, option, against, step, n,
     mean, lo, hi}``, the mean test-PSNR difference (dB) and its 95% t interval."""
-    from bench import seeds
+    from bench.tables import seeds
 
     out = []
     for preset in dict.fromkeys(p["preset"] for p in points):
@@ -334,7 +339,7 @@ def _comparison_text(rows: list[dict]) -> str:
 
 
 def run(args, meta: dict) -> str:
-    """``python -m bench.run train-curve``: every ``--preset``'s curve (default
+    """``python -m bench.train_curve``: every ``--preset``'s curve (default
     :data:`PRESETS`) of ``--method``, for each ``--option`` value and seed, into
     ``args.out``, the files rewritten after each curve; returns the text table (with the
     options' comparison, :func:`compare_options`)."""
@@ -360,3 +365,44 @@ def run(args, meta: dict) -> str:
                                         n_points=args.points, iterations=args.iterations)
                 text = write_curve(args.out, points, meta)
     return text + _comparison_text(compare_options(points))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m bench.train_curve", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--preset", dest="presets", choices=methods.all_presets(), action="append",
+                   default=None, help=f"repeatable (default: {' and '.join(PRESETS)})")
+    p.add_argument("--method", default=None, choices=methods.names(),
+                   help=f"the method whose curve is measured (default {methods.default()})")
+    p.add_argument("--option", action="append", default=None, metavar="NAME=V1,V2",
+                   help="a curve for each value of one of the method's training options (e.g. "
+                        "engine=torch,fast), compared with the first at equal steps when "
+                        "--seeds >= 2; repeated, options of one value hold for every curve "
+                        "(--option L=4 --option variant=separate-v,sum)")
+    p.add_argument("--test-stride", type=whole_number("test stride"), default=1, metavar="K",
+                   help="score every K-th test view (default 1: all)")
+    p.add_argument("--points", type=whole_number("points"), default=N_POINTS, metavar="N",
+                   help=f"evaluations along a run, the first and last step included "
+                        f"(default {N_POINTS})")
+    p.add_argument("--iterations", type=whole_number("iterations"), default=None, metavar="N",
+                   help="train N steps instead of the preset's (a budget of equal minutes for "
+                        "presets or engines of different step times)")
+    options.add_common(p)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    args.method = args.method or methods.default()
+    args.cache = args.cache or cache.cache_root()
+    try:
+        print(run(args, options.run_meta(args.device)))
+    except ValueError as exc:
+        print(f"bench.train_curve: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"results written to {args.out}/")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,5 +1,5 @@
 """Evaluating any method's baked model on a dataset split with its OpenCL renderer: the one
-render-and-score loop of the CLI (``clrender eval``) and the benchmark (``bench.measure``).
+render-and-score loop of the CLI (``clrender eval``) and the benchmark (``bench.tables.measure``).
 
 Examples:
     >>> result = evaluate("/tmp/model_b.npz", "/tmp/scn_b")

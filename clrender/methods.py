@@ -124,7 +124,7 @@ class Teacher:
 
 @dataclass(frozen=True)
 class PaperSmoke:
-    """A method's steps of ``bench.paper_smoke`` (its `paper` preset's smoke run).
+    """A method's steps of ``bench.speed.paper_smoke`` (its `paper` preset's smoke run).
 
     Attributes:
         options: the cuts it takes ({name: Option}, flags of the tool; also ``steps``, the
@@ -204,8 +204,8 @@ class Method(Protocol):
 # LEGACY_RUNS, run folders whose config.json lacks "method" are its; LIBRARIES, the
 # distributions (beyond the shell's) whose versions can change its models (bench
 # provenance); SOURCES, the files and folders of its training code, whose normalised text
-# keys the model cache (bench/cache.py); example_model(folder), a random model of its
-# default sizes baked into ``folder``, returning the file (bench.device_check, fuzzing);
+# keys the model cache (bench/modelcache/cache.py); example_model(folder), a random model of its
+# default sizes baked into ``folder``, returning the file (bench.tools.device_check, fuzzing);
 # PAPER_SMOKE, its :class:`PaperSmoke`.
 OPTIONAL = {"LEGACY_RUNS": False, "LIBRARIES": (), "SOURCES": (), "example_model": None,
             "PAPER_SMOKE": None}

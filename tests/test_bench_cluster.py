@@ -1,5 +1,5 @@
-"""`bench.run --executor ray` (bench/cluster.py) and the cache's safety for many writers
-(bench/cache.py): locks, stale locks, leftovers of killed writers, provenance.
+"""`bench.run --executor ray` (bench/modelcache/cluster.py) and the cache's safety for many writers
+(bench/modelcache/cache.py): locks, stale locks, leftovers of killed writers, provenance.
 
 The slow tests train `tiny` models of a small built-in scene on a local Ray instance (this
 machine's cores). Tolerances: the Ray table's quality columns equal the in-process run's
@@ -23,7 +23,8 @@ from pathlib import Path
 import pytest
 from filelock import Timeout
 
-from bench import cache, cluster, run
+from bench.modelcache import cache, cluster
+from bench import run
 from clrender.atomic import _TEMPORARY, atomic_folder, remove_leftovers
 from clrender.data import make_scene
 from deps import require
@@ -197,7 +198,7 @@ def test_address_needs_the_ray_executor(tmp_path, capsys):
 
 def test_a_killed_holders_lock_is_recovered(tmp_path):
     path = tmp_path / "m" / ".lock"
-    code = ("import sys, time; from pathlib import Path; from bench import cache; "
+    code = ("import sys, time; from pathlib import Path; from bench.modelcache import cache; "
             f"held = cache.lock(Path({str(path)!r})); held.acquire(); print('held', flush=True); "
             "time.sleep(120)")
     holder = subprocess.Popen([sys.executable, "-c", code], cwd=REPO, stdout=subprocess.PIPE,

@@ -1,10 +1,10 @@
 """The model cache knows its code: a change to a method's training sources makes new cache
-keys, an edit of comments, docstrings or white space does not (bench/fingerprint.py)."""
+keys, an edit of comments, docstrings or white space does not (bench/modelcache/fingerprint.py)."""
 from __future__ import annotations
 
 import pytest
 
-from bench import cache, fingerprint
+from bench.modelcache import cache, fingerprint
 from clrender import methods
 
 PY = '''"""A module."""

@@ -1,4 +1,4 @@
-"""Interleaved pairs (bench.measure.time_pairs) and the speed-up's 95% interval, on fake
+"""Interleaved pairs (bench.tables.measure.time_pairs) and the speed-up's 95% interval, on fake
 renderers whose times are given (no rendering, no timing)."""
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from bench import ablation
-from bench.measure import compare_images, speedup_interval, time_pairs
+from bench.tables import ablation
+from bench.tables.measure import compare_images, speedup_interval, time_pairs
 from clrender import methods
 
 
@@ -77,7 +77,7 @@ def test_paired_sizes_must_be_frame_sizes(tmp_path, monkeypatch):
 
 
 def test_march_bound_counts_what_each_march_reads():
-    from bench.ngprt_bounds import march_bound, sample_flops, table_bytes
+    from bench.speed.ngprt_bounds import march_bound, sample_flops, table_bytes
     from clrender.ngprt.config import preset
     from clrender.ngprt.random_model import random_baked_model
 

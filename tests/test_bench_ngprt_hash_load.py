@@ -1,10 +1,10 @@
-"""bench.ngprt_hash_load: the exact count of fine vertices on the occupied cells, the load."""
+"""bench.studies.ngprt_hash_load: the exact count of fine vertices on the occupied cells, the load."""
 import itertools
 
 import numpy as np
 import pytest
 
-from bench.ngprt_hash_load import hash_load, occupied_vertices
+from bench.studies.ngprt_hash_load import hash_load, occupied_vertices
 from clrender.ngprt.config import preset
 from clrender.ngprt.random_model import random_baked_model
 

@@ -1,4 +1,4 @@
-"""bench.ngprt_kernels on a baked model and a dataset (``--model --data``): the file is
+"""bench.speed.ngprt_kernels on a baked model and a dataset (``--model --data``): the file is
 written with one row per frame size, the model's variant, bounds and counters, and the
 larger frames keep the test cameras' pixel aspect. No timing is asserted (tests never
 time); the model is a random `tiny` one on a 2-view 24x16 scene, so it runs in seconds.
@@ -11,8 +11,8 @@ import shutil
 import numpy as np
 import pytest
 
-from bench.ngprt_kernels import main, measure
-from bench.sizes import at_size, trained_test_set
+from bench.speed.ngprt_kernels import main, measure
+from bench.speed.sizes import at_size, trained_test_set
 from clrender.camera import Camera, look_at
 from clrender.data import make_scene
 from clrender.device import _kernel_dir

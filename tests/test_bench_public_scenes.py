@@ -1,4 +1,4 @@
-"""bench.public_scenes on fake clones laid out like the public repositories: the folders it
+"""bench.tools.public_scenes on fake clones laid out like the public repositories: the folders it
 writes are read by clrender's loaders with the stated splits, and bad clones are refused
 without leaving a folder behind."""
 import json
@@ -6,7 +6,7 @@ import shutil
 
 import pytest
 
-from bench import public_scenes
+from bench.tools import public_scenes
 from clrender.data.check import check_dataset
 from dataset_fixtures import write_blender, write_llff
 

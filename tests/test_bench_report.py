@@ -5,8 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bench import ablation, compare, report, seeds, summary
-from bench.result import RowResult
+from bench.tables import ablation, compare, report, seeds, summary
+from bench.tables.result import RowResult
 from clrender import methods
 
 
@@ -46,7 +46,7 @@ def test_ndrf_table3_single_surface_is_the_full_models_outer_one(preset):
 def test_ndrf_table3_single_surface_shares_the_thresholds_tables_models(tmp_path, preset,
                                                                        same_as):
     """The README quotes the thresholds table's row for Table 3's single surface: one model."""
-    from bench import cache
+    from bench.modelcache import cache
 
     single = ablation.load_table("ndrf-table3").rows[0]
     row = next(r for r in ablation.load_table("ndrf-thresholds").rows if r.name == same_as)
@@ -370,7 +370,7 @@ def test_index_lists_every_table_written_with_its_own_run(tmp_path):
     first, second = text.index("## [NDRF Table 3"), text.index("## [NDRF supp. Table 2")
     assert first < second                              # ablation.list_tables() order
     assert ("2026-01-01, git r2, dev B, `tiny` preset, builtin-bounded scene, 2 seeds; trained "
-            "by code ndrf c0de (bench/fingerprint.py).") in text[first:second]
+            "by code ndrf c0de (bench/modelcache/fingerprint.py).") in text[first:second]
     assert "2026-01-01, git r1, dev A, `cpu` preset, builtin-bounded scene." in text[second:]
     assert "![Duplex (1e-4, 1e-2)](ndrf-thresholds/duplex-1e-4-1e-2.png)" in text
     assert "not-a-table" not in text

@@ -6,8 +6,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bench import seeds
-from bench.result import RowResult
+from bench.tables import seeds
+from bench.tables.result import RowResult
 
 
 def _m(psnr, ms, lpips=0.2, minutes=1.0, key="k"):

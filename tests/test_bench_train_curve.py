@@ -1,4 +1,4 @@
-"""`python -m bench.run train-curve`: the command line, the evaluation steps, the files, and
+"""`python -m bench.train_curve`: the command line, the evaluation steps, the files, and
 (slow) a short `tiny` curve on a small scene, whose last point is the model the tables would
 bake and whose training is the one a run without evaluations gives."""
 from __future__ import annotations
@@ -10,9 +10,9 @@ import pytest
 from bench import run, train_curve
 
 
-def test_argparse_accepts_train_curve_and_repeated_presets(tmp_path, capsys):
-    args = run.build_parser().parse_args(["train-curve", "--preset", "cpu", "--preset", "tiny"])
-    assert args.table == "train-curve" and args.presets == ["cpu", "tiny"]
+def test_argparse_accepts_repeated_presets_for_the_curve_only(tmp_path, capsys):
+    args = train_curve.build_parser().parse_args(["--preset", "cpu", "--preset", "tiny"])
+    assert args.presets == ["cpu", "tiny"]
     assert run.main(["table4", "--preset", "cpu", "--preset", "tiny", "--cache",
                      str(tmp_path)]) == 2
     assert "a table takes one --preset" in capsys.readouterr().err
@@ -72,7 +72,7 @@ def test_option_values_seeds_downscale_and_stride_reach_every_curve(tmp_path, mo
     monkeypatch.setattr(train_curve, "measure_curve", fake_curve)
     (tmp_path / "scene").mkdir()
     out = tmp_path / "out"
-    assert run.main(["train-curve", "--preset", "tiny", "--option", "engine=torch,fast",
+    assert train_curve.main(["--preset", "tiny", "--option", "engine=torch,fast",
                      "--seeds", "2", "--downscale", "2", "--test-stride", "3", "--points", "4",
                      "--iterations", "50", "--scene", str(tmp_path / "scene"),
                      "--cache", str(tmp_path / "cache"),
@@ -170,7 +170,7 @@ def test_ndrf_curve_through_its_step_hook(tmp_path, monkeypatch, one_torch_threa
     checkpoint evaluated as the tables do, and the training unchanged by the hook."""
     import torch
 
-    from bench import cache
+    from bench.modelcache import cache
     from clrender.data import make_scene
     from clrender.evaluate import evaluate
     from clrender.ndrf.train import bake_run

@@ -1,4 +1,4 @@
-"""bench.train_speed end to end on a tiny scene (1 timed step per engine): its files, each
+"""bench.speed.train_speed end to end on a tiny scene (1 timed step per engine): its files, each
 engine's samples a second under its name, every stage timed (nothing timed is asserted)."""
 import json
 
@@ -7,7 +7,7 @@ import pytest
 
 @pytest.mark.slow
 def test_train_speed_writes_each_engines_rate(tmp_path):
-    from bench.train_speed import BACKWARD, FORWARD, run
+    from bench.speed.train_speed import BACKWARD, FORWARD, run
     from clrender.data import make_scene
 
     pytest.importorskip("clrender.ngprt.fused")

@@ -1,4 +1,4 @@
-"""bench.device_check on this machine's devices against references made here (small sizes),
+"""bench.tools.device_check on this machine's devices against references made here (small sizes),
 once per CPU implementation (cl_platform: PoCL, Intel's runtime) as the reference's
 device: every device that builds kernels renders both methods, and the reference's device
 reproduces its own references."""
@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from bench import device_check
+from bench.tools import device_check
 from clrender.device import _compiles, list_devices
 
 

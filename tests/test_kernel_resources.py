@@ -1,5 +1,5 @@
 """The launches of a 1920x1080 frame in the GPU layouts give a GPU enough work-items to fill
-it: at least 10^4 each (bench/kernel_resources.py's ``frame_launches``: the renderers' own
+it: at least 10^4 each (bench/speed/kernel_resources.py's ``frame_launches``: the renderers' own
 ``launch_sizes``), on the default device. A property of the launch geometry, not a timing.
 
 Named exceptions, which do not scale with the frame's pixels: the NDRF rasteriser's tile
@@ -10,7 +10,7 @@ sized by the model (the random one here has 6400 faces).
 """
 from __future__ import annotations
 
-from bench.kernel_resources import frame_launches
+from bench.speed.kernel_resources import frame_launches
 from clrender.device import get_runtime
 
 MIN_WORK_ITEMS = 10**4

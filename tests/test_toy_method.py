@@ -2,7 +2,7 @@
 numpy reference and a tiny OpenCL kernel) registered through the ``clrender.methods`` entry
 point by writing a distribution's metadata on sys.path, then taken through every shell path
 (load, Renderer, render, `clrender train|bake|eval|render`, its own command, a one-row
-`bench.run` table, `bench.run train-curve`) with no edit to any clrender or bench file.
+`bench.run` table, `bench.train_curve`) with no edit to any clrender or bench file.
 
 Tolerances: the kernel and its reference use the same float32 operations (contraction off,
 correctly rounded sqrt), so images and hit maps are compared exactly.
@@ -124,10 +124,10 @@ def test_a_one_row_bench_table_and_a_train_curve(toy, scene, tmp_path, capsys):
 
 
 def test_toy_in_the_viewer_controls_and_the_device_check(toy, tmp_path):
-    """The viewer's controls are the toy's render options; bench.device_check makes and
+    """The viewer's controls are the toy's render options; bench.tools.device_check makes and
     checks the toy's example model like any method's (in this process: its registration
     lives on this test's sys.path)."""
-    from bench import device_check
+    from bench.tools import device_check
     from clrender import viewer
 
     assert viewer.option_specs(toy.Renderer) == [

@@ -253,7 +253,7 @@ def _central(image: np.ndarray) -> np.ndarray:
 def _resting_frame(v, client, previous=None):
     """Wait for the full-size frame of a camera at rest (other than ``previous``'s) and
     return it, (Camera, uint8 image)."""
-    from bench.browser import wait_for
+    from bench.tools.browser import wait_for
 
     seen = {"count": -1, "since": 0.0}
 
@@ -287,7 +287,7 @@ def _page_error(shot: np.ndarray, frame) -> float:
 def test_page_draws_frames_and_a_drag_moves_the_camera(model):
     """A real browser: the page shows the rendered frame, a drag on its canvas moves the
     camera, and the page then shows the new view, rendered at full size once it rests."""
-    from bench import browser
+    from bench.tools import browser
 
     need(browser.missing())
     from selenium.webdriver.common.action_chains import ActionChains

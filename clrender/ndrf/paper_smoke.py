@@ -1,4 +1,4 @@
-"""NDRF's steps of ``bench.paper_smoke`` (its ``PAPER_SMOKE``): a `tiny` NGP-RT teacher with
+"""NDRF's steps of ``bench.speed.paper_smoke`` (its ``PAPER_SMOKE``): a `tiny` NGP-RT teacher with
 real geometry (a few-step `paper` teacher has none to extract meshes from; the student's
 sizes do not depend on the teacher's), a few `paper` training steps with cut distillation
 views (and optionally a cut extraction grid), a bake, a render; and the bounds of a

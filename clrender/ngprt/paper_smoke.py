@@ -1,4 +1,4 @@
-"""NGP-RT's steps of ``bench.paper_smoke`` (its ``PAPER_SMOKE``): a few `paper` training
+"""NGP-RT's steps of ``bench.speed.paper_smoke`` (its ``PAPER_SMOKE``): a few `paper` training
 steps with a cut occupancy update, one step at full occupancy at two batch sizes (their
 memory difference per sample, extrapolated to the paper's 2^21 samples), a bake with cut
 visibility culling, a render. Each step runs in a child process of its own (``phase``)."""

@@ -205,7 +205,7 @@ class Renderer:
         rays, deferred_vec: lanes per work-item of the march and the deferred MLP
             (default :func:`lane_width` of the device).
         kernel_dir: build the kernels from this folder instead of the installed
-            ``kernels/`` (``bench.ngprt_kernels --baseline``: another version of them).
+            ``kernels/`` (``bench.speed.ngprt_kernels --baseline``: another version of them).
     """
 
     def __init__(self, model, device=None, use_G: bool = True, exact: bool = False,

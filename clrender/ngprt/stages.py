@@ -1,4 +1,4 @@
-"""Stage timing of a training step (``bench.train_speed``): a clock the step reports to.
+"""Stage timing of a training step (``bench.speed.train_speed``): a clock the step reports to.
 
 The step calls :func:`stage` around each forward stage and :func:`mark` on each stage's
 output; both do nothing (one call, no allocation) unless a :class:`StageClock` is active

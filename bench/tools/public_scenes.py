@@ -2,11 +2,11 @@
 
     git clone https://github.com/EricXu23/Bonsaidownload
     git clone https://github.com/FunnyPocketBook/sfm-ooi-extract
-    python -m bench.public_scenes bonsai Bonsaidownload sfm-ooi-extract data/bonsai
+    python -m bench.tools.public_scenes bonsai Bonsaidownload sfm-ooi-extract data/bonsai
     python -m bench.run table4 --scene data/bonsai --downscale 2     # 400x266, 255 / 37 views
 
     git clone https://github.com/shouxieai/nerf
-    python -m bench.public_scenes lego nerf data/lego              # 800x800, 87 / 13 views
+    python -m bench.tools.public_scenes lego nerf data/lego              # 800x800, 87 / 13 views
 
 - **bonsai** (Mip-NeRF 360, the scene of NGP-RT's S4 and Table S1), an LLFF folder: the
   292 frames at 800x533 (JPEG, re-encoded by a third party) of ``EricXu23/Bonsaidownload``
@@ -106,7 +106,7 @@ def build(out: Path, write) -> Path:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.public_scenes", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench.tools.public_scenes", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="scene", required=True)
     b = sub.add_parser("bonsai", help="Mip-NeRF 360 bonsai as an LLFF folder")

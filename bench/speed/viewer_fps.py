@@ -1,17 +1,17 @@
 """Frames a second the viewer delivers to a page (render + JPEG encode + send) while the
-camera moves, measured with a real headless chromium (:mod:`bench.browser`).
+camera moves, measured with a real headless chromium (:mod:`bench.tools.browser`).
 
 The viewer draws every frame at full size (``preview_scale`` 1), ``--size`` x ``--size``
 pixels in a page of that size (``?fixedDpr=1``: viser's adaptive pixel ratio off); a drag
 on the page's canvas keeps the camera moving for ``--seconds``. Counted: the JPEG frames
-the page received (:func:`bench.browser.jpeg_image_times`), between the first and the last,
+the page received (:func:`bench.tools.browser.jpeg_image_times`), between the first and the last,
 beside the frames the server sent and the renderer alone (same model, camera and size, no
 browser). The browser (WebGL on SwiftShader) shares the CPU with
 the renderer, as it does when someone views a model on this machine.
 
 Examples:
-    python -m bench.viewer_fps model.npz                     # 400x400, 10 s of dragging
-    python -m bench.viewer_fps ndrf.npz --size 400 --seconds 5
+    python -m bench.speed.viewer_fps model.npz                     # 400x400, 10 s of dragging
+    python -m bench.speed.viewer_fps ndrf.npz --size 400 --seconds 5
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ from clrender import methods
 from clrender.renderer import Renderer
 from clrender.viewer import Viewer
 
-from . import browser
+from bench.tools import browser
 
 def renderer_fps(model, camera, seconds: float) -> tuple[float, float]:
     """(frames a second of the renderer alone, median kernel ms) at ``camera``."""
@@ -99,7 +99,7 @@ def measure(model, size: int, seconds: float) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.viewer_fps", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench.speed.viewer_fps", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("model", help="a baked model (.npz), any method")
     p.add_argument("--size", type=int, default=400, help="frame width and height, pixels")
@@ -107,7 +107,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     reason = browser.missing()
     if reason:
-        print(f"bench.viewer_fps: {reason}", file=sys.stderr)
+        print(f"bench.speed.viewer_fps: {reason}", file=sys.stderr)
         return 2
     model = methods.load(args.model)
     r = measure(model, args.size, args.seconds)

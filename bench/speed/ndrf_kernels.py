@@ -1,11 +1,11 @@
 """Per-stage timings of the NDRF renderer against their bounds, for both hit sources.
 
-    python -m bench.ndrf_kernels                          # random K=2 model, orbit, 200 and 800
-    python -m bench.ndrf_kernels --model ndrf.npz --data DIR [--teacher ngprt.npz]
+    python -m bench.speed.ndrf_kernels                          # random K=2 model, orbit, 200 and 800
+    python -m bench.speed.ndrf_kernels --model ndrf.npz --data DIR [--teacher ngprt.npz]
 
 Random model: one orbit view per ``--sizes`` side. Trained model (``--model`` and ``--data``):
 the dataset's test cameras at the test size, 800x800 and 1920x1080 (``--frames``), each
-camera resized with :func:`bench.sizes.at_size` (the vertical field of view and the
+camera resized with :func:`bench.speed.sizes.at_size` (the vertical field of view and the
 pixel aspect kept: a square test camera at 1920x1080 sees a wider view, not a stretched
 one). Stages: ``intersect`` (the rasteriser's kernels, or Embree on the host plus the upload),
 ``conv0`` (with the gather of the screen pixels) and ``conv1``, kernel times from profiling
@@ -13,7 +13,7 @@ events; median and p10-p90 over every camera and repeat after one warm-up frame 
 With ``--teacher`` the NGP-RT teacher renders the same cameras in the same run: the
 student's speed-up is the teacher's median frame time over the student's (raster path).
 
-Bounds, from this device's rates measured here (:mod:`bench.limits`): conv0 and conv1 from
+Bounds, from this device's rates measured here (:mod:`bench.speed.limits`): conv0 and conv1 from
 their FLOPs (:func:`counters`: conv0 as the kernel computes it, factored by linearity into
 per-vertex projections and a view table) at the measured FLOP rate; conv0's gathers (its
 projected vertex rows and table row pairs, one random read each) at the random-gather rate
@@ -32,9 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.limits import flop_rate, gather_rate
-from bench.ngprt_kernels import TRAINED_SIZES
-from bench.sizes import at_size, parse_size, trained_test_set
+from bench.speed.limits import flop_rate, gather_rate
+from bench.speed.ngprt_kernels import TRAINED_SIZES
+from bench.speed.sizes import at_size, parse_size, trained_test_set
 from clrender import methods
 from clrender.atomic import write_atomic
 from clrender.cliopts import whole_number
@@ -197,7 +197,7 @@ def run(model, frames: dict, repeats: int, out: Path, name: str, views: str, dev
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.ndrf_kernels", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench.speed.ndrf_kernels", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--sizes", type=int, nargs="+", default=[200, 800],
                    help="image sides of the random model's orbit view")

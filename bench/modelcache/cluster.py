@@ -7,7 +7,7 @@ seed, shared by every row that names it, as the cache shares it).
 
 Where models go: a worker trains in a private temporary folder and returns the baked model
 and its run folder (bytes, through Ray's object store) to the driver, which writes them into
-its cache (bench/cache.py) under the model's lock. The cache is then only ever written on
+its cache (bench/modelcache/cache.py) under the model's lock. The cache is then only ever written on
 the driver's machine: file locks on network file systems are unreliable (``flock`` over NFS
 depends on the server and mount options), so a cache shared by all nodes would have to
 trust them; with the driver owning the cache, nodes need no shared file system other than a
@@ -29,13 +29,13 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from bench import cache, provenance
+from bench.modelcache import cache, provenance
 
 # CPU cores a training task asks for, per preset; torch runs that many threads.
 TASK_CPUS = {"tiny": 1, "cpu": 2, "cpu-long": 2, "paper": 8}
 # Retries of a task whose worker died (Ray's max_retries); its own exceptions are not retried.
 MAX_RETRIES = 2
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 class TaskFailed(RuntimeError):

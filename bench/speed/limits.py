@@ -1,5 +1,5 @@
 """Measured limits of the OpenCL device: what any method's kernel bounds are computed at
-(bench/ngprt_bounds.py, bench/ndrf_kernels.py).
+(bench/speed/ngprt_bounds.py, bench/speed/ndrf_kernels.py).
 
 Two rates, measured on the chosen device with kernels built here (fast build):
 

@@ -1,18 +1,18 @@
 """Kernel timings of the OpenCL NGP-RT renderer: a random structured model, or a trained one.
 
-    python -m bench.ngprt_kernels                       # 400x400, `cpu` preset, 5 repeats
-    python -m bench.ngprt_kernels --size 800            # the 800x800 frame
-    python -m bench.ngprt_kernels --size 200 --repeats 3 --preset tiny --out results/
-    python -m bench.ngprt_kernels --L-C 256             # finer grids: G has more to skip
-    python -m bench.ngprt_kernels --exact               # the exact build (tests' build)
-    python -m bench.ngprt_kernels --baseline /tmp/old_kernels --variant separate-v
-    python -m bench.ngprt_kernels --model M.npz --data DIR   # trained: test cameras, 3 sizes
+    python -m bench.speed.ngprt_kernels                       # 400x400, `cpu` preset, 5 repeats
+    python -m bench.speed.ngprt_kernels --size 800            # the 800x800 frame
+    python -m bench.speed.ngprt_kernels --size 200 --repeats 3 --preset tiny --out results/
+    python -m bench.speed.ngprt_kernels --L-C 256             # finer grids: G has more to skip
+    python -m bench.speed.ngprt_kernels --exact               # the exact build (tests' build)
+    python -m bench.speed.ngprt_kernels --baseline /tmp/old_kernels --variant separate-v
+    python -m bench.speed.ngprt_kernels --model M.npz --data DIR   # trained: test cameras, 3 sizes
 
 Random model: for every aggregation variant (``--variant``: some), with and without the
 occupancy distance grid G, renders one orbit view and reports the march and deferred-MLP
 kernel times (OpenCL profiling events; median and p10-p90 over the repeats, after one
 warm-up render), the marching and occupied points per ray, each stage's bound and the
-ratio time / bound (:mod:`bench.limits`: the stage's own counters at the gather and FLOP
+ratio time / bound (:mod:`bench.speed.limits`: the stage's own counters at the gather and FLOP
 rates measured on the device in the same run), and the speed-ups: each variant against
 ``mlp``, G on against G off, and OpenCL against the numpy reference. The reference is
 timed once per variant (with G) on a smaller frame (``--ref-size``) and scaled by the
@@ -21,7 +21,7 @@ pixel count; the table says so. Writes ``<out>/ngprt_kernels.{json,md}``.
 Trained model (``--model M.npz --data DIR``): its one variant, with G, on the first
 ``--views`` test cameras of DIR at the test size and at ``--sizes`` (default 800x800 and
 1920x1080; each test camera through ``Camera.scaled_to``, the pixel aspect kept:
-:func:`bench.sizes.at_size`), the same columns per frame size. Writes
+:func:`bench.speed.sizes.at_size`), the same columns per frame size. Writes
 ``<out>/ngprt_kernels_<model stem>.{json,md}``.
 
 ``--baseline DIR`` renders every row with the kernel sources of DIR too (e.g. a copy of an
@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.ngprt_bounds import deferred_bound, march_bound, measure_limits
-from bench.sizes import at_size, parse_size, trained_test_set
+from bench.speed.ngprt_bounds import deferred_bound, march_bound, measure_limits
+from bench.speed.sizes import at_size, parse_size, trained_test_set
 from clrender.atomic import write_atomic
 from clrender.cliopts import whole_number
 from clrender.device import get_runtime
@@ -163,7 +163,7 @@ def bounds_note(meta: dict) -> str:
     lim = meta["limits"]
     rates = ", ".join(f"{name} {rate / 1e9:.2f} G/s ({lim['table_bytes'][name] / 2**20:.2f} MiB)"
                       for name, rate in lim["gathers_per_s"].items())
-    note = (f"Bounds (bench/ngprt_bounds.py): each stage's counters at the rates measured in this "
+    note = (f"Bounds (bench/speed/ngprt_bounds.py): each stage's counters at the rates measured in this "
             f"run (random 32-byte gathers from tables of the model's sizes: {rates}; "
             f"{lim['flops_per_s'] / 1e9:.0f} GFLOP/s), gathers and FLOPs not overlapped; "
             f"ratio = time / bound.")
@@ -275,7 +275,7 @@ def run_trained(model_path: Path, data: Path, sizes, repeats: int, out: Path, de
                 downscale: int | None = None) -> list[dict]:
     """Times a trained model on its dataset's test cameras (at ``downscale``, default the
     model's training one) at the test size and at ``sizes`` ("WxH",
-    :func:`bench.sizes.at_size`), with G; writes ``<out>/ngprt_kernels_<model stem>.{md,json}``."""
+    :func:`bench.speed.sizes.at_size`), with G; writes ``<out>/ngprt_kernels_<model stem>.{md,json}``."""
     model = load_baked(model_path)
     ds = trained_test_set(model_path, data, downscale)
     cameras = ds.cameras[:views]
@@ -305,7 +305,7 @@ def run_trained(model_path: Path, data: Path, sizes, repeats: int, out: Path, de
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.ngprt_kernels", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench.speed.ngprt_kernels", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--size", type=int, default=400, help="image width and height")
     p.add_argument("--repeats", type=int, default=5)

@@ -11,7 +11,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from bench import columns, compare, seeds, summary
+from bench.tables import columns, compare, seeds, summary
 from clrender.atomic import write_atomic
 
 
@@ -47,7 +47,7 @@ def speedups(table, results: list, key=lambda row, m: m.time["median"]) -> list:
 
 
 def _n_seeds(results: list) -> int:
-    """Seeds behind each row (1 for results not from :func:`bench.seeds.aggregate`)."""
+    """Seeds behind each row (1 for results not from :func:`bench.tables.seeds.aggregate`)."""
     return len(results[0].seeds or [None])
 
 
@@ -74,8 +74,8 @@ def _head(table, extra: list[str]) -> list[str]:
 
 def markdown(table, results: list, meta: dict, claims: list[dict]) -> str:
     """The table with each paper column as "ours" and "paper" sub-columns (with several
-    seeds, results from :func:`bench.seeds.aggregate`, ours are "mean ± std"), then the
-    paper's claims (``claims``, from :func:`bench.compare.measure`) with their verdicts."""
+    seeds, results from :func:`bench.tables.seeds.aggregate`, ours are "mean ± std"), then the
+    paper's claims (``claims``, from :func:`bench.tables.compare.measure`) with their verdicts."""
     n = _n_seeds(results)
     extra = [c for c in _stat_columns(table, results) if c not in table.paper_columns]
     head = _head(table, extra)
@@ -285,11 +285,11 @@ def _csv(table, records: list[dict], stats: list[str], n_seeds: int) -> str:
 def write_table(out_dir: Path, table, results: list, meta: dict) -> str:
     """Write TABLE.md/.csv/.json/.png and one sample render per row; returns the Markdown.
 
-    ``results``: one :class:`bench.result.RowResult` per row (with its model's
+    ``results``: one :class:`bench.tables.result.RowResult` per row (with its model's
     ``train_minutes`` and ``model_key``), or over several seeds one
-    :func:`bench.seeds.aggregate` result per row (JSON rows then carry ``seeds``,
+    :func:`bench.tables.seeds.aggregate` result per row (JSON rows then carry ``seeds``,
     ``per_seed``, ``spread``; the CSV ``PSNR_std`` and ``SSIM_std``). The JSON's
-    ``comparisons``: :func:`bench.compare.measure`.
+    ``comparisons``: :func:`bench.tables.compare.measure`.
     """
     claims = compare.measure(table, results)
     md = markdown(table, results, meta, claims)
@@ -312,8 +312,8 @@ def write_table(out_dir: Path, table, results: list, meta: dict) -> str:
 
 
 def write_index(out_dir: Path) -> None:
-    """OUT/README.md: the summary of the paper's claims (:func:`bench.summary.summary`),
-    then every table with a ``OUT/<key>.json`` (in :func:`bench.ablation.list_tables`
+    """OUT/README.md: the summary of the paper's claims (:func:`bench.tables.summary.summary`),
+    then every table with a ``OUT/<key>.json`` (in :func:`bench.tables.ablation.list_tables`
     order), each with the date, git revision, device, preset and scene of its own run, the
     code fingerprint of each method that trained its models, a link, its plot and one
     sample render per row."""
@@ -325,7 +325,7 @@ def write_index(out_dir: Path) -> None:
         run = (f"{data['date']}, git {data['git_revision']}, {data['device']}, "
                f"`{data['preset']}` preset, {data['scene']} scene"
                + (f", {len(seed_list)} seeds" if len(seed_list) > 1 else "")
-               + (f"; trained by code {code} (bench/fingerprint.py)" if code else "") + ".")
+               + (f"; trained by code {code} (bench/modelcache/fingerprint.py)" if code else "") + ".")
         rows = [(r["row"], r["sample"]) for r in data["rows"]]
         lines += [f"### [{data['title']}]({key}.md)", "", run, "",
                   f"![quality vs time]({key}.png)", "",
@@ -335,13 +335,13 @@ def write_index(out_dir: Path) -> None:
 
 
 def main(argv=None) -> int:
-    """``python -m bench.report [--results DIR] [--readme README.md]``: rewrite DIR/README.md
+    """``python -m bench.tables.report [--results DIR] [--readme README.md]``: rewrite DIR/README.md
     (summary and index) from DIR's tables; with ``--readme`` copy the summary into that file
     between its ``<!-- results:begin -->`` and ``<!-- results:end -->`` lines."""
     import argparse
     import sys
 
-    p = argparse.ArgumentParser(prog="python -m bench.report", description=main.__doc__)
+    p = argparse.ArgumentParser(prog="python -m bench.tables.report", description=main.__doc__)
     p.add_argument("--results", type=Path, default=Path("results"),
                    help="the folder bench.run wrote (default results/)")
     p.add_argument("--readme", type=Path, default=None,
@@ -355,7 +355,7 @@ def main(argv=None) -> int:
             changed = summary.copy_into(args.readme, summary.summary(args.results))
             print(f"{args.readme}: summary {'updated' if changed else 'unchanged'}")
     except (ValueError, OSError) as exc:
-        print(f"bench.report: error: {exc}", file=sys.stderr)
+        print(f"bench.tables.report: error: {exc}", file=sys.stderr)
         return 2
     return 0
 

@@ -1,7 +1,7 @@
-"""The bounds the measured device limits (bench/limits.py) put on the NGP-RT kernels.
+"""The bounds the measured device limits (bench/speed/limits.py) put on the NGP-RT kernels.
 
-    python -m bench.ngprt_bounds                # rates for the `cpu` preset's table sizes
-    python -m bench.ngprt_bounds --preset paper
+    python -m bench.speed.ngprt_bounds                # rates for the `cpu` preset's table sizes
+    python -m bench.speed.ngprt_bounds --preset paper
 
 A kernel's bound is the time its own counters need at the measured gather and FLOP rates,
 gathers and FLOPs not overlapped (a lower bound for a machine that does one at a time, and
@@ -17,7 +17,7 @@ at most 2x below a bound that overlaps them perfectly):
 * deferred MLP: the MLP's FLOPs per covered pixel (opacity > 0; the kernel writes the
   background elsewhere).
 
-Never asserts; ``bench.ngprt_kernels`` prints each kernel's time against its bound.
+Never asserts; ``bench.speed.ngprt_kernels`` prints each kernel's time against its bound.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from bench.limits import F8_BYTES, flop_rate, gather_rate
+from bench.speed.limits import F8_BYTES, flop_rate, gather_rate
 from clrender.device import get_runtime
 from clrender.ngprt.config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM,
                                    preset)
@@ -100,7 +100,7 @@ def deferred_bound(covered: float, limits: dict) -> dict:
 def main(argv=None) -> int:
     from clrender.ngprt.random_model import random_baked_model
 
-    p = argparse.ArgumentParser(prog="python -m bench.ngprt_bounds", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench.speed.ngprt_bounds", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--preset", default="cpu")
     p.add_argument("--device", default=None)

@@ -1,7 +1,7 @@
 """Every OpenCL device of a machine renders both methods, checked against reference images.
 
-    python -m bench.device_check --make-reference .devcheck     # here, with PoCL: models + images
-    python -m bench.device_check --reference .devcheck --out results/   # on any machine
+    python -m bench.tools.device_check --make-reference .devcheck     # here, with PoCL: models + images
+    python -m bench.tools.device_check --reference .devcheck --out results/   # on any machine
 
 ``--make-reference`` writes each registered method's example model (its ``example_model``:
 NGP-RT a random ``cpu`` model, separate-v, L = 2; NDRF a random K = 2 model) as baked files,
@@ -39,7 +39,7 @@ from clrender.metrics import psnr, summarize_ms
 from clrender.paths import path_cameras
 from clrender.renderer import Renderer
 
-from .sizes import parse_size
+from bench.speed.sizes import parse_size
 
 SIZES = ((800, 800), (1920, 1080))
 
@@ -113,10 +113,10 @@ def check_device_apart(index: int, folder: Path, repeats: int, sizes) -> tuple[l
     with tempfile.TemporaryDirectory() as tmp:
         rows_file = Path(tmp) / "rows.json"
         proc = subprocess.run(     # from the folder bench/ is in, whatever the caller's
-            [sys.executable, "-m", "bench.device_check", "--reference", str(folder.resolve()),
+            [sys.executable, "-m", "bench.tools.device_check", "--reference", str(folder.resolve()),
              "--device-index", str(index), "--rows-out", str(rows_file),
              "--repeats", str(repeats), "--sizes", *(f"{w}x{h}" for w, h in sizes)],
-            capture_output=True, text=True, cwd=Path(__file__).resolve().parent.parent)
+            capture_output=True, text=True, cwd=Path(__file__).resolve().parents[2])
         print(proc.stdout, end="", flush=True)
         rows = json.loads(rows_file.read_text()) if rows_file.exists() else None
     if proc.returncode == 0 and rows is not None:
@@ -188,7 +188,7 @@ def run(folder: Path, out: Path, repeats: int) -> list[dict]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.device_check", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench.tools.device_check", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--make-reference", type=Path, metavar="DIR",

@@ -1,7 +1,7 @@
 """Training speed of NGP-RT by stage, for each training engine, in one interleaved run.
 
-    python -m bench.train_speed                               # cpu preset, built-in bounded
-    python -m bench.train_speed --data DIR --steps 40 --engines torch,fast
+    python -m bench.speed.train_speed                               # cpu preset, built-in bounded
+    python -m bench.speed.train_speed --data DIR --steps 40 --engines torch,fast
 
 Each engine trains its own copy of the same initial model on the same data, one step of
 each in turn (``--warmup`` untimed steps, then ``--steps`` timed ones, from step 0, the
@@ -11,7 +11,7 @@ auxiliary encoding + MLP, coarse trilinear, fine levels, fusion, compositing, sh
 losses, each stage's backward, the optimiser; the occupancy updates timed per engine
 after the steps, one warm-up and one later update, amortised over the preset's run): the
 median seconds over the timed steps, and a bound from the stage's counted gathers, streamed bytes and FLOPs at
-this machine's rates measured in the same run (:mod:`bench.limits`'s random-gather and
+this machine's rates measured in the same run (:mod:`bench.speed.limits`'s random-gather and
 FLOP rates on the OpenCL device, the same CPU; the streaming rate of a torch copy).
 "Samples" are the samples entering the loss (the preset's target batch);
 ``samples_per_s`` = median samples over median step time. Writes
@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bench import cache
-from bench.limits import F8_BYTES, flop_rate, gather_rate
-from bench.ngprt_bounds import deferred_flops
+from bench.modelcache import cache
+from bench.speed.limits import F8_BYTES, flop_rate, gather_rate
+from bench.speed.ngprt_bounds import deferred_flops
 from clrender.atomic import write_atomic
 from clrender.data import load_dataset
 from clrender.ngprt import engine as engines
@@ -189,7 +189,7 @@ def markdown(res: dict, meta: dict) -> str:
              f"{meta['date']}; {meta['steps']} timed steps after {meta['warmup']}, engines "
              f"interleaved; median per stage; torch threads {meta['threads']}. Bounds: the "
              "stage's counted gathers, streamed bytes and FLOPs at this machine's measured "
-             "rates (bench/train_speed.py `counts`).", "",
+             "rates (bench/speed/train_speed.py `counts`).", "",
              head, "|" + "---|" * (2 + 2 * len(names))]
     rows = [(f"{s}", "forward_s", s) for s in FORWARD] + [("optimiser", "forward_s", "optimiser")] \
         + [(f"{s} backward", "backward_s", s) for s in BACKWARD]
@@ -247,7 +247,7 @@ def run(preset: str, data, steps: int, warmup: int, out: Path, names, variant: s
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.train_speed", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench.speed.train_speed", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--preset", default="cpu", choices=sorted(TRAIN_PRESETS))
     p.add_argument("--data", default="builtin-bounded",

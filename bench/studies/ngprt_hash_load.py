@@ -1,7 +1,7 @@
 """How crowded a trained NGP-RT model's fine hash tables are: the collision load per level.
 
-    python -m bench.ngprt_hash_load model.npz [more.npz ...]
-    python -m bench.ngprt_hash_load model.npz --log2-T 18     # the same space, 2^18 entries
+    python -m bench.studies.ngprt_hash_load model.npz [more.npz ...]
+    python -m bench.studies.ngprt_hash_load model.npz --log2-T 18     # the same space, 2^18 entries
 
 The attention of NGP-RT exists to disambiguate hash collisions (ngp-rt.md §3.2, S3.1):
 positions of different content that share a table entry. A sample in occupied space
@@ -63,7 +63,7 @@ def hash_load(model, T: int | None = None) -> list[dict]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.ngprt_hash_load", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench.studies.ngprt_hash_load", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("models", nargs="+", help="baked NGP-RT models (.npz)")
     p.add_argument("--log2-T", type=int, default=None, metavar="N",

@@ -1,6 +1,6 @@
 """The results summary: one short table per paper table (each claim of the paper: our figure,
 the paper's, the verdict) from the tables' JSON (``results/<key>.json``, written by
-:func:`bench.report.write_table`), and its copy into a README between two markers.
+:func:`bench.tables.report.write_table`), and its copy into a README between two markers.
 
 Examples:
     >>> text = summary(Path("results"))
@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from bench import ablation, compare
+from bench.tables import ablation, compare
 from clrender.atomic import write_atomic
 
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
@@ -52,7 +52,7 @@ def table_summary(data: dict) -> list[str]:
 
 def load(out_dir: Path) -> list[tuple[str, dict]]:
     """(key, JSON) of every table with an ``OUT/<key>.json``, in
-    :func:`bench.ablation.list_tables` order."""
+    :func:`bench.tables.ablation.list_tables` order."""
     found = []
     for key in map(ablation.file_stem, ablation.list_tables()):
         path = out_dir / f"{key}.json"

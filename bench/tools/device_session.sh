@@ -1,18 +1,18 @@
 #!/bin/bash
 # One prepared session on a lent GPU machine that reaches no package registry (docs/gpu.md).
 #
-#   bash bench/device_session.sh prepare [BONSAI_DIR]   # here: fills .gpu/ (~55 MB, git-ignored)
-#   bash bench/device_session.sh run                    # there, as root, with .gpu carried
+#   bash bench/tools/device_session.sh prepare [BONSAI_DIR]   # here: fills .gpu/ (~55 MB, git-ignored)
+#   bash bench/tools/device_session.sh run                    # there, as root, with .gpu carried
 #
 # prepare: Python 3.12 wheels of what the GPU image lacks, device_check's reference images
-# (made here with PoCL) and the bonsai LLFF folder (bench.public_scenes). run: registers the
+# (made here with PoCL) and the bonsai LLFF folder (bench.tools.public_scenes). run: registers the
 # vendor's OpenCL driver (/etc/OpenCL/vendors), makes clrender importable from the tree
 # (its entry points, kernels/ as clrender.kernels), then device_check, the kernel = reference
 # tests on the GPU's platform, a `cpu-long` bonsai model trained with torch on CUDA and its
 # kernel times at 1920x1080, and the random-model kernel tables. ~5.5 min on an H200; logs
 # and results under $OUT.
 set -u
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 G=.gpu
 WHEELS="pyopencl==2026.1.4 pytools==2026.1.1 platformdirs==4.14.9 siphash24==1.9
         embreex==4.4.0.post1 trimesh==5.2.0 fast-simplification==0.2.0 filelock==4.3.2"
@@ -28,7 +28,7 @@ prepare() {
     done
     # Only the images travel: the example models are remade there (deterministic; md5 printed).
     local tmp; tmp=$(mktemp -d)
-    .venv/bin/python -m bench.device_check --make-reference "$tmp" || exit 1
+    .venv/bin/python -m bench.tools.device_check --make-reference "$tmp" || exit 1
     cp "$tmp"/reference.npz "$tmp"/reference.json "$tmp"/ndrf.npz $G/devcheck/ && rm -rf "$tmp"
     if [ -n "$bonsai" ]; then
         mkdir -p $G/bonsai && cp -r "$bonsai"/images "$bonsai"/poses_bounds.npy $G/bonsai/
@@ -65,9 +65,9 @@ EOF
     timeout 60 python3 -m clrender.cli info
 
     step device_check
-    python3 -c "from pathlib import Path; from bench.device_check import make_models; make_models(Path('$G/devcheck'))"
+    python3 -c "from pathlib import Path; from bench.tools.device_check import make_models; make_models(Path('$G/devcheck'))"
     md5sum $G/devcheck/*.npz
-    timeout 120 python3 -m bench.device_check --reference $G/devcheck --out $R --repeats 5
+    timeout 120 python3 -m bench.tools.device_check --reference $G/devcheck --out $R --repeats 5
     pack
 
     step "kernel = reference tests on the GPU's platform"
@@ -86,14 +86,14 @@ EOF
         tail -n 2 /tmp/bonsai/log.jsonl
         timeout 60 python3 -m clrender.cli bake /tmp/bonsai --out /tmp/bonsai.npz
         timeout 60 python3 -m clrender.cli eval /tmp/bonsai.npz $G/bonsai --downscale 2 | tee $R/bonsai_eval.json
-        timeout 60 python3 -m bench.ngprt_kernels --model /tmp/bonsai.npz --data $G/bonsai \
+        timeout 60 python3 -m bench.speed.ngprt_kernels --model /tmp/bonsai.npz --data $G/bonsai \
             --downscale 2 --sizes 1920x1080 --views 5 --repeats 5 --out $R
         pack
     fi
 
     step "random models: NGP-RT and NDRF kernel tables"
-    timeout 60 python3 -m bench.ngprt_kernels --size 800 --repeats 5 --variant separate-v --out $R
-    timeout 60 python3 -m bench.ndrf_kernels --repeats 5 --out $R
+    timeout 60 python3 -m bench.speed.ngprt_kernels --size 800 --repeats 5 --variant separate-v --out $R
+    timeout 60 python3 -m bench.speed.ndrf_kernels --repeats 5 --out $R
     pack
     step done
 }
@@ -101,5 +101,5 @@ EOF
 case "${1:-}" in
     prepare) shift; prepare "$@" ;;
     run) run ;;
-    *) echo "usage: bash bench/device_session.sh prepare [BONSAI_DIR] | run" >&2; exit 2 ;;
+    *) echo "usage: bash bench/tools/device_session.sh prepare [BONSAI_DIR] | run" >&2; exit 2 ;;
 esac

@@ -1,5 +1,5 @@
-"""One table row's measurements, from :func:`bench.measure.measure_row` through
-:func:`bench.seeds.aggregate` to :mod:`bench.report`."""
+"""One table row's measurements, from :func:`bench.tables.measure.measure_row` through
+:func:`bench.tables.seeds.aggregate` to :mod:`bench.tables.report`."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -26,7 +26,7 @@ class RowResult:
         seeds, per_seed: over several seeds, the seeds and each seed's result (without its
             sample); None for one measurement.
         paired_speedup: against the row's baseline, timed as interleaved pairs at the test
-            size (:func:`bench.measure.time_pairs`): {ratio, lo, hi (95% interval), n,
+            size (:func:`bench.tables.measure.time_pairs`): {ratio, lo, hi (95% interval), n,
             stage, size, ms_row, ms_baseline}; None without a baseline.
         paired_at: {"WxH": the same} at the table's ``paired_sizes``.
         same_image: for a table whose rows must render their baseline's image

@@ -10,9 +10,9 @@ and ``render`` options (its Renderer's ``RENDER_OPTIONS``: NGP-RT ``use_G``).
 A row's ``baseline`` (or the table's) is the row its speed-up is measured against. The
 paper's claims are the table's comparisons, each a row against another (PSNR difference
 row minus other, the paper's the same way). A row declares its own with ``compare``, a list
-of ``{ against = "ROW" }`` (a difference: :func:`bench.seeds.verdict`) or ``{ against =
+of ``{ against = "ROW" }`` (a difference: :func:`bench.tables.seeds.verdict`) or ``{ against =
 "ROW", claim = "equivalent", margin = 0.3 }`` (equivalent within ±margin dB:
-:func:`bench.seeds.equivalence`). A table where no row declares ``compare`` compares each
+:func:`bench.tables.seeds.equivalence`). A table where no row declares ``compare`` compares each
 row that has a baseline with it; one where any row does has exactly the declared ones.
 """
 from __future__ import annotations
@@ -27,7 +27,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-from bench import columns
+from bench.tables import columns
 from clrender import methods
 
 
@@ -73,7 +73,7 @@ class Table:
     show_stages: bool = False       # a column with the per-stage times (NDRF tables)
     timing_sizes: tuple[int, ...] = ()   # frame widths also timed (test cameras scaled)
     comparisons: tuple[Comparison, ...] = ()
-    # Rows with a baseline are timed against it as interleaved pairs (bench.measure
+    # Rows with a baseline are timed against it as interleaved pairs (bench.tables.measure
     # .measure_pair) on the renderer's ms_<paired_stage> (None: the frame), at the test
     # size and at paired_sizes ("WxH"); same_image: a row must render its baseline's image.
     paired_stage: str | None = None
@@ -228,8 +228,8 @@ def load_table(key: str) -> Table:
 
 
 def _sizes(sizes, path: Path) -> list[str]:
-    """The table's ``paired_sizes``, each "WxH" (:func:`bench.sizes.parse_size`)."""
-    from bench.sizes import parse_size
+    """The table's ``paired_sizes``, each "WxH" (:func:`bench.speed.sizes.parse_size`)."""
+    from bench.speed.sizes import parse_size
 
     try:
         return [f"{w}x{h}" for w, h in map(parse_size, sizes)]

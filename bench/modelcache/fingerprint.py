@@ -1,6 +1,6 @@
 """Which code trained a model: a hash of the normalised text of a method's training sources
 (its ``SOURCES``), so the model cache serves a model only to the code that would train it
-again (bench/cache.py).
+again (bench/modelcache/cache.py).
 
 Normalised: Python by its syntax tree without docstrings (comments, blank lines, line breaks
 and docstrings do not count), OpenCL C with its comments removed and runs of white space as

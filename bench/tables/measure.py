@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.result import RowResult
+from bench.tables.result import RowResult
 from clrender import methods
 from clrender.evaluate import score_views
 from clrender.metrics import summarize_ms
@@ -27,7 +27,7 @@ def measure_row(baked_path, test_set, render_options: dict, device=None, repeats
         timing_sizes: image widths at which the same views are timed again (cameras scaled,
             aspect kept): ``time_at[width]``.
     Returns:
-        the :class:`bench.result.RowResult` (``train_minutes`` and ``model_key`` unset).
+        the :class:`bench.tables.result.RowResult` (``train_minutes`` and ``model_key`` unset).
     """
     renderer = Renderer(methods.load(baked_path), device=device, **render_options)
     per_view, sample = score_views(renderer, test_set, lpips=True)
@@ -85,7 +85,7 @@ def time_pairs(row, base, cameras, repeats: int, stage: str | None, background=N
     warm-up render each; the time is the renderer's ``ms_<stage>`` (``stage`` None: the
     frame's ``ms``). Returns :func:`speedup_interval` of base / row with ``stage``,
     ``size`` ("WxH"), ``ms_row``, ``ms_baseline`` (medians over the pairs) and ``ratios``
-    (each pair's, so seeds pool their pairs: :func:`bench.seeds.aggregate`)."""
+    (each pair's, so seeds pool their pairs: :func:`bench.tables.seeds.aggregate`)."""
     key = "ms" if stage is None else f"ms_{stage}"
     for cam in cameras[:1]:
         row.render(cam, background=background)
@@ -121,14 +121,14 @@ def measure_pair(row_baked, row_render: dict, base_baked, base_render: dict, tes
                  sizes=(), same_image: bool = False) -> dict:
     """A row against its baseline, timed as interleaved pairs (:func:`time_pairs`) on the
     first ``timing_views`` test cameras, at the test size and at each of ``sizes``
-    ("WxH", the cameras through :func:`bench.sizes.at_size`); with ``same_image`` the
+    ("WxH", the cameras through :func:`bench.speed.sizes.at_size`); with ``same_image`` the
     test views' images compared (:func:`compare_images`).
 
     Returns:
         {"paired_speedup": the test size's pairs, "paired_at": {size: pairs},
         "same_image": :func:`compare_images` or None}.
     """
-    from bench.sizes import at_size, parse_size
+    from bench.speed.sizes import at_size, parse_size
 
     row = Renderer(methods.load(row_baked), device=device, **row_render)
     base = Renderer(methods.load(base_baked), device=device, **base_render)

@@ -1,4 +1,4 @@
-"""Frames of the kernel benchmarks (``bench.ngprt_kernels``, ``bench.ndrf_kernels``): a
+"""Frames of the kernel benchmarks (``bench.speed.ngprt_kernels``, ``bench.speed.ndrf_kernels``): a
 trained model's test split, a "WIDTHxHEIGHT" argument parsed, and a test camera resized
 to it."""
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The `paper` preset's smoke run: a few training steps of each method at the papers' sizes,
 bake, render one small view; the time and peak resident memory of every phase.
 
-    python -m bench.paper_smoke --data /work/data/lego200 --out results/
+    python -m bench.speed.paper_smoke --data /work/data/lego200 --out results/
 
 What it catches is what a GPU user's first `paper` run would die on (a shape, an
 allocation, an hour of set-up), at CPU cost. Each method that declares ``PAPER_SMOKE``
@@ -81,7 +81,7 @@ def smoked() -> dict:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m bench.paper_smoke", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench.speed.paper_smoke", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", type=Path, required=True, help="a bounded dataset folder")
     p.add_argument("--out", type=Path, default=Path("results"))

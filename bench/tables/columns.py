@@ -1,5 +1,5 @@
 """The columns a table may show (its ``paper_columns`` and the statistics beside them): how
-to read each from a :class:`bench.result.RowResult` and how to format it.
+to read each from a :class:`bench.tables.result.RowResult` and how to format it.
 
 A column is one of :data:`CORE`, a statistic a row's method declares
 (``Renderer.SCALAR_STATS``, with its format) or a stage time ``"<Stage> (ms)"`` (the

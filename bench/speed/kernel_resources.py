@@ -1,7 +1,7 @@
 """Private memory, work-group limits and launch sizes of every kernel, per OpenCL device.
 
-    python -m bench.kernel_resources                  # every device, 1920x1080, results/
-    python -m bench.kernel_resources --size 800x800 --out /tmp/r
+    python -m bench.speed.kernel_resources                  # every device, 1920x1080, results/
+    python -m bench.speed.kernel_resources --size 800x800 --out /tmp/r
 
 For every device that builds kernels, each method's kernels are built (the fast build, the
 one that renders) in two layouts: ``gpu``, the organisation the renderers choose on a GPU
@@ -154,7 +154,7 @@ def run(width: int, height: int, out: Path) -> list[dict]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench.kernel_resources", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m bench.speed.kernel_resources", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--size", type=parse_size, default=(1920, 1080), metavar="WxH",
                    help="frame size whose launches are counted (default 1920x1080)")

@@ -1,7 +1,7 @@
 """Cached scenes and trained/baked models for the benchmark harness, safe for many writers.
 
 Models are keyed by a hash of everything that determines them (the method's model and
-training config, the code that trains it (bench/fingerprint.py), data fingerprint, seed,
+training config, the code that trains it (bench/modelcache/fingerprint.py), data fingerprint, seed,
 teacher), so tables that share a row configuration
 share a model (table2's L=4 row is table3's Separate-Att (V) row and table4's L=4 rows; every
 NDRF row of a scene shares its NGP-RT teacher).
@@ -13,7 +13,7 @@ Any number of processes (bench.run, Ray tasks' drivers) may share a root on one 
 file system: a model or a built-in scene is made under its own lock (``filelock``, an
 ``flock`` the kernel releases when its holder dies, so a killed process's lock is never
 stale), and whoever waited finds it made. File locks are not trusted across the nodes of a
-network file system: there, one driver owns the cache (bench/cluster.py).
+network file system: there, one driver owns the cache (bench/modelcache/cluster.py).
 """
 from __future__ import annotations
 
@@ -27,8 +27,8 @@ from pathlib import Path
 
 from filelock import FileLock
 
-from bench import provenance
-from bench.fingerprint import code_fingerprint
+from bench.modelcache import provenance
+from bench.modelcache.fingerprint import code_fingerprint
 from clrender import methods
 from clrender.atomic import atomic_folder, remove_leftovers, write_atomic
 
@@ -208,7 +208,7 @@ def train_into(plan: ModelPlan, folder: Path, teacher_baked: Path | None,
                revision: str | None = None) -> dict:
     """Train ``plan`` into ``folder/run`` and bake ``folder/model.npz``; returns the
     record :func:`commit` stores (``spec``, ``train_minutes``, ``trained_by``;
-    ``revision``: see :func:`bench.provenance.trained_by`)."""
+    ``revision``: see :func:`bench.modelcache.provenance.trained_by`)."""
     import torch
 
     from clrender.runs import pick_device

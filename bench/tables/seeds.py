@@ -15,7 +15,7 @@ from dataclasses import fields, replace
 import numpy as np
 from scipy import stats
 
-from bench.result import RowResult
+from bench.tables.result import RowResult
 
 
 def _mean(values: list):
@@ -37,7 +37,7 @@ def _mean(values: list):
 
 
 def aggregate(per_seed: list[RowResult], seeds: list[int]) -> RowResult:
-    """One row's results (:func:`bench.measure.measure_row`, with their model), one per
+    """One row's results (:func:`bench.tables.measure.measure_row`, with their model), one per
     seed, as one result of means (see :func:`_mean`; the sample render is ``seeds[0]``'s)
     with ``seeds`` and ``per_seed`` (the inputs without their sample render). One seed
     gives that seed's result unchanged, plus those two fields."""
@@ -53,10 +53,10 @@ def aggregate(per_seed: list[RowResult], seeds: list[int]) -> RowResult:
 
 
 def pooled_pairs(pairs: list) -> dict | None:
-    """One interleaved-pair timing (:func:`bench.measure.time_pairs`) per seed as one: its
+    """One interleaved-pair timing (:func:`bench.tables.measure.time_pairs`) per seed as one: its
     interval over every seed's pairs pooled (not an average of intervals), the times the
     seeds' means; None if a seed has none."""
-    from bench.measure import speedup_interval
+    from bench.tables.measure import speedup_interval
 
     if not pairs or any(p is None for p in pairs):
         return None

@@ -1,13 +1,13 @@
 """A table's comparisons measured: each claim of the paper (a row against another,
-:class:`bench.ablation.Comparison`) as our PSNR difference paired by seed, its interval and
-verdict (:mod:`bench.seeds`), beside the paper's difference and both speed-ups.
+:class:`bench.tables.ablation.Comparison`) as our PSNR difference paired by seed, its interval and
+verdict (:mod:`bench.tables.seeds`), beside the paper's difference and both speed-ups.
 
 Verdicts are per comparison (each at its own level, no correction for how many a table
 makes); the seeds are those the run was started with.
 """
 from __future__ import annotations
 
-from bench import seeds
+from bench.tables import seeds
 
 
 def _psnrs(m) -> list[float]:
@@ -39,7 +39,7 @@ def speedup_cell(s: dict | None) -> str:
 
 def measure(table, results: list) -> list[dict]:
     """One record per comparison of ``table`` (``results``: one per row, from
-    :func:`bench.seeds.aggregate` or of one seed): ``row``, ``against``, ``claim``,
+    :func:`bench.tables.seeds.aggregate` or of one seed): ``row``, ``against``, ``claim``,
     ``margin`` (dB), ``n`` (seeds), ``mean`` and ``std`` of the paired PSNR differences (dB,
     row minus against; ``std`` None for one seed), ``lo``, ``hi`` and ``confidence`` of their
     interval (95% for a difference, 90% for an equivalence; None for one seed), ``paper``
