@@ -14,6 +14,9 @@
 typedef struct {
     vfloat brk[LATTICE_BREAKS], cum[LATTICE_BREAKS];
     vfloat A[LATTICE_BREAKS - 1], B[LATTICE_BREAKS - 1], K[LATTICE_BREAKS - 1];
+#if MARCH_PAPER && USE_G
+    vint jumps;            /* bit q: breakpoint q is a jump of the path (space.lattice_jumps) */
+#endif
 } v_lattice;
 
 /* A candidate breakpoint: c where t0 < c < t1 (false for NaN), else t1. */
@@ -55,6 +58,10 @@ inline void v_lattice_build(float3 o3, vpoint dv, float near, float far, v_latti
     for (int i = 0; i < 12; ++i) lt->brk[i + 1] = c[i];
     lt->brk[LATTICE_BREAKS - 1] = t1;
     lt->cum[0] = (vfloat)(0.0f);
+#if MARCH_PAPER && USE_G
+    vint region_before = (vint)(-1);
+    lt->jumps = (vint)(0);
+#endif
     for (int q = 0; q < LATTICE_BREAKS - 1; ++q) {
         const vfloat ta = lt->brk[q], tb = lt->brk[q + 1];
         const vfloat tm = ta + (tb - ta) * 0.5f;
@@ -70,6 +77,16 @@ inline void v_lattice_build(float3 o3, vpoint dv, float near, float far, v_latti
         const vfloat e0 = d[0] * ma - p0 * b, e1 = d[1] * ma - p1 * b, e2 = d[2] * ma - p2 * b;
         const vfloat K = sqrt(e0 * e0 + e1 * e1 + e2 * e2 + b * b);
         const vint inner = VMASK(mm <= 1.0f);
+#if MARCH_PAPER && USE_G
+        /* The piece's region: -1 inside the cube, else 2 * axis + (x_axis > 0). */
+        const vint region = select(select(select((vint)(4), (vint)(2), isy), (vint)(0), isx)
+                                   + select((vint)(0), (vint)(1), VMASK(sg > 0.0f)),
+                                   (vint)(-1), inner);
+        if (q > 0)
+            lt->jumps |= select((vint)(0), (vint)(1 << q), VMASK(region_before >= 0)
+                                & VMASK(region >= 0) & VMASK(region_before != region));
+        region_before = region;
+#endif
         lt->A[q] = select(ma * ma, (vfloat)(1.0f), inner);
         lt->B[q] = select(ma * b, (vfloat)(0.0f), inner);
         lt->K[q] = select(K, (vfloat)(1.0f), inner);

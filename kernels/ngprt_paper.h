@@ -9,6 +9,7 @@
 #define CLRENDER_NGPRT_PAPER_H
 #pragma OPENCL FP_CONTRACT OFF
 #include "ngprt_skip.h"
+#if MARCH_PAPER
 
 /* First byte of level lev in the concatenated mip. */
 inline int ngp_mip_offset(int lev)
@@ -51,23 +52,28 @@ inline vint v_paper_g_step(const v_rays *r, const v_march_point *p, vint g)
 #else
 /* Eq. 9, unbounded, in contracted arc length (marches.paper_g_step_unbounded):
  * k + floor(4 g / G_RES / s) lattice steps, at least k + 1, at most the first lattice
- * point of the next piece of the lane's lattice (across a piece's end the contraction may
- * jump, and arc length bounds no distance); k + 1 from the first lattice point of a piece
- * after the ray's start (it may lie on the jump itself, off its piece's segment). */
+ * point at or past the next jump of the lane's contracted path (across a jump arc length
+ * bounds no distance; docs/ngprt.md "The paper's step with G"); k + 1 from the first
+ * lattice point at or past a jump (it may lie on the jump itself). cum is nondecreasing,
+ * so the last jump met from the end is the next one ahead. */
 inline vint v_paper_g_step(const v_rays *r, const v_march_point *p, vint g)
 {
     const vint n = v_floor_i(4.0f * VF(g) / (float)G_RES / r->s);
-    const vfloat sigma = v_lattice_g(r, r->k);
-    vfloat start = r->lt->cum[0], end = r->lt->cum[1];
-    for (int q = 1; q < LATTICE_BREAKS - 1; ++q) {
-        const vint in = VMASK(r->lt->cum[q] <= sigma);
-        start = select(start, r->lt->cum[q], in);
-        end = select(end, r->lt->cum[q + 1], in);
+    const vfloat sigma = v_lattice_g(r, r->k), prev = v_lattice_g(r, r->k - 1);
+    vfloat end = sigma;
+    vint ahead = (vint)(0), first = (vint)(0);
+    for (int q = LATTICE_BREAKS - 2; q >= 1; --q) {
+        const vint jump = VMASK((r->lt->jumps & (vint)(1 << q)) != 0);
+        const vfloat c = r->lt->cum[q];
+        first |= jump & VMASK(c > prev) & VMASK(c <= sigma);
+        const vint past = jump & VMASK(c > sigma);
+        end = select(end, c, past);
+        ahead |= past;
     }
     vint k_p = v_ceil_i(end / r->s);
     k_p = select(k_p, k_p - 1, VMASK(v_lattice_g(r, k_p - 1) >= end));
-    const vint first = VMASK(r->lt->cum[1] <= sigma) & VMASK(v_lattice_g(r, r->k - 1) < start);
-    return select(max(r->k + 1, min(r->k + n, k_p)), r->k + 1, first);
+    const vint step = select(r->k + n, min(r->k + n, k_p), ahead);
+    return select(max(r->k + 1, step), r->k + 1, first);
 }
 #endif
 #endif
@@ -93,4 +99,5 @@ inline vint v_paper_skip(const ngp_model *m, const v_rays *r, const v_march_poin
     return v_skip(m, r, p, empty, code);
 #endif
 }
+#endif  /* MARCH_PAPER */
 #endif

@@ -25,7 +25,8 @@ from clrender.ngprt.baked import validate
 from clrender.ngprt.config import ModelConfig
 from clrender.ngprt.random_model import empty_model_with_occupancy
 from clrender.ngprt.render_ref import _cells, _lattice_g, _point_u, march_reference, ray_range
-from clrender.ngprt.space import (cell_index, lattice_end, lattice_rows, lattice_t, lattice_table,
+from clrender.ngprt.space import (cell_index, lattice_end, lattice_jumps, lattice_rows, lattice_t,
+                                  lattice_table,
                                   to_grid)
 
 F32 = np.float32
@@ -147,30 +148,58 @@ def test_every_occupied_lattice_point_is_taken(box_model, use_G, march):
         f"sampled {got['n_occ'][missed[0]]}")
 
 
-def test_paper_g_step_takes_one_point_from_a_pieces_first(box_model):
-    # The contraction jumps where a ray crosses |x_a| = |x_b| outside the cube (and at the
-    # tie itself scales both axes), so a piece's first lattice point may lie off its
-    # piece's segment: G's ball about it bounds nothing ahead (bonsai, before this rule:
-    # one ray in 4 views skipped 3 occupied points). From it the step is k + 1; from the
-    # next point G's full step (clamped to the piece) applies.
+def test_lattice_jumps_are_the_outer_regions_changes():
+    # From inside the cube along (0.6, -0.9, -0.1): the split where |y| = |z| inside the
+    # cube, the cube's face x = 1 and the split of the x+ region where y = -1 keep the
+    # contracted path continuous; |x| = |y| outside the cube (x+ region to y- region)
+    # makes it jump.
+    o = np.array([[0.5, 0.0, 0.3]], F32)
+    d = _unit(np.array([[0.6, -0.9, -0.1]]))
+    brk, cum, *_ = lattice_table(o, d, np.zeros(1, F32), np.full(1, 40.0, F32))
+    jumps = lattice_jumps(o, d, brk)[0]
+    x = (o[0] + brk[0][:, None] * d[0])[1:-1]
+    inside_split = np.isclose(np.abs(x[:, 1]), np.abs(x[:, 2]), atol=1e-5) & \
+        (np.abs(x).max(axis=1) < 1)
+    face = np.isclose(x[:, 0], 1.0, atol=1e-5)
+    outer_split = np.isclose(x[:, 1], -1.0, atol=1e-5) & (x[:, 0] > 1)
+    outer_tie = np.isclose(np.abs(x[:, 0]), np.abs(x[:, 1]), atol=1e-4) & (x[:, 0] > 1)
+    for kind in (inside_split, face, outer_split, outer_tie):
+        assert kind.sum() == 1
+    assert not jumps[1:-1][inside_split | face | outer_split].any()
+    assert jumps[1:-1][outer_tie].all() and jumps.sum() == 1
+    assert not jumps[0] and not jumps[-1]
+
+
+def test_paper_g_step_passes_continuous_breaks_and_stops_at_jumps(box_model):
+    # A ray's contracted path is continuous across the cube's face and across splits of a
+    # region, so G's step passes them; across a jump arc length bounds nothing, so the
+    # step stops at the first lattice point at or past it, and from that point (it may lie
+    # on the jump itself, off the next piece's segment) takes one point (bonsai, when every
+    # piece's first point was not held: one ray in 4 views skipped 3 occupied points).
     from clrender.ngprt.marches import paper_g_step_unbounded
 
     cfg, s = box_model.config, F32(box_model.step)
-    o = np.array([[0.3, -0.2, 0.1]], F32)
-    d = _unit(np.array([[0.9, 0.8, 0.1]]))
+    o = np.array([[0.5, 0.0, 0.3]], F32)
+    d = _unit(np.array([[0.6, -0.9, -0.1]]))
     t_start, t_end, _ = ray_range(cfg, o, d)
     table = lattice_table(o, d, t_start, t_end)
+    jumps = lattice_jumps(o, d, table[0])
     cum = table[1][0]
-    j = next(q for q in range(1, len(cum) - 1) if cum[q + 1] - cum[q] > 8 * s)
-    first = int(np.ceil(cum[j] / s))
-    first -= int(F32(first - 1) * s >= cum[j])
-    g = np.array([255])
-    for k, want in ((first, first + 1), (first + 1, None)):
-        step = int(paper_g_step_unbounded(cfg, np.array([k]), g, s, table)[0])
-        if want is not None:
-            assert step == want
-        else:
-            assert k + 1 < step <= int(np.ceil(cum[j + 1] / s))
+    (q,) = np.flatnonzero(jumps[0])[:1]
+    assert np.any(~jumps[0][1:q]), "no continuous break before the jump to pass"
+
+    def first_at_or_past(c: float) -> int:
+        k = int(np.ceil(c / s))
+        return k - int(F32(k - 1) * s >= c)
+
+    def step(k: int) -> int:
+        return int(paper_g_step_unbounded(cfg, np.array([k]), np.array([255]), s, table,
+                                          jumps)[0])
+
+    at_jump = first_at_or_past(cum[q])
+    assert step(0) == at_jump                       # passes the face, stops at the jump
+    assert step(at_jump) == at_jump + 1             # one point from the jump's first
+    assert step(at_jump + 1) > at_jump + 2          # then G's full step again
 
 
 @pytest.mark.parametrize("use_G", [True, False])

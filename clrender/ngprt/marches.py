@@ -80,23 +80,27 @@ def paper_g_step_bounded(config, k, t, g, s, lim) -> np.ndarray:
     return np.maximum(k + 1, k_G)
 
 
-def paper_g_step_unbounded(config, k, g, s, table) -> np.ndarray:
+def paper_g_step_unbounded(config, k, g, s, table, jumps) -> np.ndarray:
     """Eq. 9, unbounded, in contracted arc length: ``k + floor(4 g / G_res / s)`` lattice
     steps (``4 g / G_res``: G's distance in contracted units, ``c = 4 u - 2``), at least
-    ``k + 1`` and at most the first lattice point of the next piece of the ray's lattice
-    (``table``: the rays' ``space.lattice_table`` rows). Within a piece the contracted path
-    is straight, so arc length is distance and every point passed lies in G's empty ball;
-    across a piece's end the contraction may jump (the planes ``|x_a| = |x_b|``), where
-    arc length bounds no distance. The first lattice point of a piece (after the ray's
-    start) steps to ``k + 1``: it may lie on the jump itself (at a tie the contraction
-    scales both axes), off its piece's segment, so its ball says nothing about it."""
+    ``k + 1`` and at most the first lattice point at or past the next jump of the ray's
+    contracted path (``jumps``: the rays' :func:`space.lattice_jumps` rows; ``table``:
+    their ``space.lattice_table`` rows). Between jumps the contracted path is continuous
+    and straight piece by piece, so its arc length bounds the distance from the point, and
+    every point passed lies in G's empty ball; across a jump arc length bounds nothing. A
+    lattice point at or just past a jump (the first at or after it) steps to ``k + 1``: it
+    may lie on the jump itself, where the contraction takes either side's value, so its
+    ball says nothing about the points after it (docs/ngprt.md "The paper's step with G")."""
     cum = table[1]
     sigma = k.astype(F32) * s
+    prev = (k - 1).astype(F32) * s
     n = np.floor(F32(4.0) * g.astype(F32) / F32(config.G_res) / s).astype(np.int64)
-    j = (cum[:, 1:cum.shape[1] - 1] <= sigma[:, None]).sum(axis=1)
-    rows = np.arange(len(k))
-    end = cum[rows, j + 1]
+    cut = np.where(jumps, cum, F32(np.inf))
+    first = ((cut > prev[:, None]) & (cut <= sigma[:, None])).any(axis=1)
+    end = np.where(cut > sigma[:, None], cut, F32(np.inf)).min(axis=1)
+    ahead = np.isfinite(end)
+    end = np.where(ahead, end, sigma)
     k_p = np.ceil(end / s).astype(np.int64)
     k_p = np.where((k_p - 1).astype(F32) * s >= end, k_p - 1, k_p)
-    first = (j > 0) & ((k - 1).astype(F32) * s < cum[rows, j])
-    return np.where(first, k + 1, np.maximum(k + 1, np.minimum(k + n, k_p)))
+    step = np.where(ahead, np.minimum(k + n, k_p), k + n)
+    return np.where(first, k + 1, np.maximum(k + 1, step))

@@ -22,8 +22,8 @@ from .config import N_MIP, T_STOP
 from .encoding import hash_corner, sh4
 from .marches import (READ_KINDS, check_march, feature_reads, g_read, g_reads_counted,
                       occupancy_reads, paper_g_step_bounded, paper_g_step_unbounded)
-from .space import (cell_index, lattice_end, lattice_rows, lattice_s, lattice_t, lattice_table,
-                    ray_box, to_grid)
+from .space import (cell_index, lattice_end, lattice_jumps, lattice_rows, lattice_s, lattice_t,
+                    lattice_table, ray_box, to_grid)
 
 F32 = np.float32
 # Corner c = 0..7 of a cell is offset ((c >> 2) & 1, (c >> 1) & 1, c & 1): x slowest.
@@ -414,10 +414,12 @@ def march_reference(model, origins: np.ndarray, dirs: np.ndarray, use_G: bool = 
     s = F32(model.step)
     t_start, t_end, hit = ray_range(cfg, o, d)
     st = _Rays(len(o))
-    table = None
+    table = jumps = None
     if unbounded:       # S from t_start: k0 = 0 (docs/ngprt.md "Step lattice")
         table = lattice_table(o, d, t_start, t_end)
         g_end = lattice_end(table)
+        if march == "paper" and use_G:
+            jumps = lattice_jumps(o, d, table[0])
     else:
         g_end = t_end
         with np.errstate(invalid="ignore", over="ignore"):
@@ -442,7 +444,7 @@ def march_reference(model, origins: np.ndarray, dirs: np.ndarray, use_G: bool = 
                 if g_reads_counted(cfg, march):
                     st.reads[rows[e], 1] += g_read(cfg, lev[e], use_G)
                 _skip(model, st, march, rows[e], o, d, t[e], u[e], lev[e], use_G, s, g_end,
-                      lattice_rows(tab, e) if unbounded else None)
+                      lattice_rows(tab, e) if unbounded else None, jumps)
             active[rows] = (_lattice_g(st.k[rows], s) < g_end[rows]) & (st.T[rows] >= F32(T_STOP))
     with np.errstate(invalid="ignore", divide="ignore"):
         depth = np.where(st.opacity > 0, st.depth_acc / st.opacity, F32(0.0)).astype(F32)
@@ -451,11 +453,12 @@ def march_reference(model, origins: np.ndarray, dirs: np.ndarray, use_G: bool = 
 
 
 def _skip(model, st: _Rays, march: str, r, o, d, t, u, lev, use_G: bool, s, g_end,
-          table=None) -> None:
+          table=None, jumps=None) -> None:
     """Steps the empty points of rays ``r`` (at distance t, grid u, exit level lev) on:
     ours, the larger of the mip's and G's skips; the paper's, G's step where ``G > 0``
     (Eq. 9, :mod:`clrender.ngprt.marches`), else the mip's. ``table``: the rays' lattice
-    rows (unbounded)."""
+    rows (unbounded); ``jumps``: every ray's :func:`space.lattice_jumps` (the paper's
+    unbounded march with G)."""
     g = g_distance(model, u, lev, use_G)
     mine = np.ones(len(r), bool) if march == "ours" else g == 0
     k = st.k[r].copy()
@@ -472,7 +475,7 @@ def _skip(model, st: _Rays, march: str, r, o, d, t, u, lev, use_G: bool, s, g_en
     if jump.any():
         if table is not None:
             k[jump] = paper_g_step_unbounded(model.config, k[jump], g[jump], s,
-                                             lattice_rows(table, jump))
+                                             lattice_rows(table, jump), jumps[r[jump]])
         else:
             k[jump] = paper_g_step_bounded(model.config, k[jump], t[jump], g[jump], s,
                                            g_end[r[jump]] / s + K_PAST_END)

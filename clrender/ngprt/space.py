@@ -67,13 +67,7 @@ def lattice_table(o: np.ndarray, d: np.ndarray, t_start: np.ndarray, t_end: np.n
     c = np.sort(np.where(keep, c, t_end[:, None]), axis=1)
     brk = np.concatenate([t_start[:, None], c, t_end[:, None]], axis=1).astype(F32)
     ta, tb = brk[:, :-1], brk[:, 1:]
-    tm = ta + (tb - ta) * F32(0.5)
-    xm = o[:, None, :] + tm[..., None] * d[:, None, :]
-    am = np.abs(xm)
-    mm = np.maximum(np.maximum(am[..., 0], am[..., 1]), am[..., 2])
-    a = np.where(am[..., 0] == mm, 0, np.where(am[..., 1] == mm, 1, 2))
-    xa = np.take_along_axis(xm, a[..., None], axis=2)[..., 0]
-    sg = np.where(xa > 0, F32(1.0), F32(-1.0))
+    mm, a, sg = _piece_regions(o, d, brk)
     p = o[:, None, :] + ta[..., None] * d[:, None, :]
     ma = sg * np.take_along_axis(p, a[..., None], axis=2)[..., 0]
     b = sg * np.take_along_axis(np.broadcast_to(d[:, None, :], p.shape), a[..., None],
@@ -90,6 +84,45 @@ def lattice_table(o: np.ndarray, d: np.ndarray, t_start: np.ndarray, t_end: np.n
     for q in range(LATTICE_BREAKS - 1):
         cum[:, q + 1] = cum[:, q] + length[:, q]
     return brk, cum, A, B, K
+
+
+def _piece_regions(o: np.ndarray, d: np.ndarray, brk: np.ndarray):
+    """The contraction's region of each piece between consecutive breakpoints ``brk``
+    (N, LATTICE_BREAKS), from its midpoint ``x = o + (t_a + (t_b - t_a) * 0.5) d``:
+    ``mm = |x|_inf`` (inside the unit cube where ``mm <= 1``), the axis ``a`` holding it
+    (x before y before z on ties) and the sign ``sg`` of ``x_a``; each (N, 13)."""
+    ta, tb = brk[:, :-1], brk[:, 1:]
+    tm = ta + (tb - ta) * F32(0.5)
+    xm = o[:, None, :] + tm[..., None] * d[:, None, :]
+    am = np.abs(xm)
+    mm = np.maximum(np.maximum(am[..., 0], am[..., 1]), am[..., 2])
+    a = np.where(am[..., 0] == mm, 0, np.where(am[..., 1] == mm, 1, 2))
+    xa = np.take_along_axis(xm, a[..., None], axis=2)[..., 0]
+    sg = np.where(xa > 0, F32(1.0), F32(-1.0))
+    return mm, a, sg
+
+
+def lattice_jumps(o: np.ndarray, d: np.ndarray, brk: np.ndarray) -> np.ndarray:
+    """Where each ray's contracted path jumps (docs/ngprt.md "The paper's step with G").
+
+    The contraction is continuous except across ``|x_a| = |x_b| > 1``, between two outer
+    regions of different axis: breakpoint ``q`` (1 .. 12) of a :func:`lattice_table` is a jump where the pieces on
+    both sides lie in outer regions (``|x|_inf > 1`` at their midpoints) of a different
+    axis or sign. Across any other breakpoint the contracted path is continuous.
+
+    Args:
+        o, d: (N, 3) float32 rays; brk: (N, LATTICE_BREAKS) float32 breakpoints of their
+            :func:`lattice_table`.
+    Returns:
+        (N, LATTICE_BREAKS) bool, False at the ray's start and end.
+    """
+    o, d = np.asarray(o, F32), np.asarray(d, F32)
+    mm, a, sg = _piece_regions(o, d, np.asarray(brk, F32))
+    region = np.where(mm <= F32(1.0), -1, 2 * a + (sg > 0))
+    before, after = region[:, :-1], region[:, 1:]
+    jumps = np.zeros(brk.shape, bool)
+    jumps[:, 1:-1] = (before >= 0) & (after >= 0) & (before != after)
+    return jumps
 
 
 def lattice_end(table) -> np.ndarray:
