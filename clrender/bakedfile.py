@@ -138,10 +138,11 @@ def trained_downscale(path) -> int:
     return value
 
 
-def read(path, format: str, version: int, keys=()) -> tuple[dict, dict]:
+def read(path, format: str, version, keys=()) -> tuple[dict, dict]:
     """Read a baked file of ``format`` / ``version``.
 
     Args:
+        version: the version this reader knows, or a tuple of the versions it reads.
         keys: manifest keys the format requires besides format, version and arrays.
     Returns:
         ``(manifest, arrays)``: the manifest dict and ``{name: np.ndarray}``, the arrays
@@ -152,9 +153,10 @@ def read(path, format: str, version: int, keys=()) -> tuple[dict, dict]:
         manifest = _manifest(npz, where)
         if manifest["format"] != format:
             fail(where, f"format is {manifest['format']!r}, expected {format!r}")
-        if manifest.get("version") != version:
+        known = (version,) if isinstance(version, int) else tuple(version)
+        if manifest.get("version") not in known:
             fail(where, f"unknown version {manifest.get('version')!r}; this reader knows "
-                        f"version {version}")
+                        f"version {' and '.join(map(str, known))}")
         for key in ("arrays",) + tuple(keys):
             if key not in manifest:
                 fail(where, f"manifest has no {key!r}")

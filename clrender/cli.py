@@ -82,7 +82,9 @@ def _cmd_train(args) -> int:
 
 
 def _cmd_bake(args) -> int:
-    path = methods.of_run(args.run).bake_run(args.run, args.out)
+    plugin = methods.of_run(args.run)
+    path = plugin.bake_run(args.run, args.out,
+                           **cliopts.chosen(args, "bake", methods.name_of(plugin)))
     print(f"wrote {path}")
     return 0
 
@@ -170,6 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("bake", help="bake a trained run (any method) into a model file")
     s.add_argument("run")
     s.add_argument("--out", required=True)
+    cliopts.add_groups(s, "bake")
     s.set_defaults(func=_cmd_bake)
 
     s = sub.add_parser("render", help="render a baked model along a camera path")

@@ -12,10 +12,14 @@ import argparse
 
 from . import methods
 
-KINDS = {"train": "training", "render": "render"}
+KINDS = {"train": "training", "render": "render", "bake": "bake"}
+# Whose options a group holds, for its title and for refusing another method's flag.
+OWNERS = {"train": "--method {}", "render": "a model of method {}", "bake": "a run of method {}"}
 
 
 def _declared(plugin, kind: str) -> dict:
+    if kind == "bake":
+        return methods.declared(plugin, "BAKE_OPTIONS")
     return plugin.TRAIN_OPTIONS if kind == "train" else plugin.Renderer.RENDER_OPTIONS
 
 
@@ -34,7 +38,7 @@ def _argument(name: str, opt: methods.Option) -> dict:
 
 def add_groups(parser: argparse.ArgumentParser, kind: str) -> None:
     """Add every method's ``kind`` options ("train": ``TRAIN_OPTIONS``, "render": the
-    Renderer's ``RENDER_OPTIONS``) to ``parser``, one argument group per method. Methods
+    Renderer's ``RENDER_OPTIONS``, "bake": ``BAKE_OPTIONS``) to ``parser``, one argument group per method. Methods
     declaring the same flag share it when its argparse form is the same; otherwise the
     later method's flag is prefixed with its name (``--<method>-<option>``)."""
     flags: dict[str, dict] = {}          # flag -> {method: option name}
@@ -47,8 +51,7 @@ def add_groups(parser: argparse.ArgumentParser, kind: str) -> None:
                 flag = f"--{name}-{opt_name.replace('_', '-')}"
             if flag not in forms:
                 group = group or parser.add_argument_group(
-                    f"{name} {KINDS[kind]} options", f"for --method {name}" if kind == "train"
-                    else f"for models of method {name}")
+                    f"{name} {KINDS[kind]} options", "for " + OWNERS[kind].format(name))
                 group.add_argument(flag, dest=_dest(kind, flag), **form)
                 forms[flag] = form
             flags.setdefault(flag, {})[name] = opt_name
@@ -75,7 +78,7 @@ def chosen(args: argparse.Namespace, kind: str, method: str) -> dict:
     foreign = sorted(f for f in given if method not in flags[f])
     if foreign:
         owners = "; ".join(f"{f} is for {', '.join(flags[f])}" for f in foreign)
-        what = f"--method {method}" if kind == "train" else f"a model of method {method}"
+        what = OWNERS[kind].format(method)
         raise ValueError(f"{', '.join(foreign)} do{'es' if len(foreign) == 1 else ''} not "
                          f"apply to {what} ({owners})")
     declared = _declared(methods.get(method), kind)

@@ -187,8 +187,9 @@ class Method(Protocol):
     def train_steps(self, preset: str, iterations: int | None = None) -> tuple[int, int]:
         """(iterations, log_every) of a run of ``preset``."""
 
-    def bake_run(self, run_dir, out_path) -> Path:
-        """Bake a run folder into a model file; returns its path."""
+    def bake_run(self, run_dir, out_path, **options) -> Path:
+        """Bake a run folder into a model file; returns its path. ``options``: its
+        ``BAKE_OPTIONS`` (given only where it declares them)."""
 
     def check_model_options(self, options: dict) -> None:
         """Raise ValueError unless ``options`` are model options of a bench row."""
@@ -206,9 +207,10 @@ class Method(Protocol):
 # provenance); SOURCES, the files and folders of its training code, whose normalised text
 # keys the model cache (bench/modelcache/cache.py); example_model(folder), a random model of its
 # default sizes baked into ``folder``, returning the file (bench.tools.device_check, fuzzing);
-# PAPER_SMOKE, its :class:`PaperSmoke`.
+# PAPER_SMOKE, its :class:`PaperSmoke`; BAKE_OPTIONS, keyword options of ``bake_run``
+# ({name: Option}, CLI flags of `clrender bake`; a bench row's ``bake``).
 OPTIONAL = {"LEGACY_RUNS": False, "LIBRARIES": (), "SOURCES": (), "example_model": None,
-            "PAPER_SMOKE": None}
+            "PAPER_SMOKE": None, "BAKE_OPTIONS": {}}
 # The keywords (after the named positional arguments) the shell passes to each hook.
 TRAIN_KEYWORDS = ("seed", "iterations", "torch_device", "progress", "on_step", "downscale")
 SCENES = ("bounded", "unbounded")

@@ -25,7 +25,7 @@ def write_raw(path, arrays, manifest=None, **manifest_overrides):
     """An .npz written without validation, manifest listing ``arrays`` unless given."""
     if manifest is None:
         manifest = {"format": FORMAT, "version": VERSION, "config": small().to_dict(),
-                    "gamma": 1.0,
+                    "gamma": 1.0, "G_metric": "box",
                     "arrays": {n: {"shape": list(a.shape), "dtype": str(a.dtype)}
                                for n, a in arrays.items()}}
     manifest.update(manifest_overrides)
@@ -36,7 +36,7 @@ def write_raw(path, arrays, manifest=None, **manifest_overrides):
 def raw_from(model):
     arrays = {n: a.copy() for n, a in model.arrays.items()}
     manifest = {"format": FORMAT, "version": VERSION, "config": model.config.to_dict(),
-                "gamma": model.gamma}
+                "gamma": model.gamma, "G_metric": model.G_metric}
     return arrays, manifest
 
 
@@ -78,8 +78,14 @@ def _corrupt(arrays, manifest, case):
         idx[tuple(np.argwhere(idx >= 0)[0])] = arrays["coarse_blocks"].shape[0]
         return "coarse_block_index has values in"
     if case == "unknown version":
-        manifest["version"] = 2
-        return "unknown version 2"
+        manifest["version"] = 3
+        return "unknown version 3"
+    if case == "no G metric":
+        del manifest["G_metric"]
+        return "manifest has no 'G_metric'"
+    if case == "unknown G metric":
+        manifest["G_metric"] = "chebyshev"
+        return "G_metric 'chebyshev'"
     if case == "wrong format name":
         manifest["format"] = "something-else"
         return "format is 'something-else'"
@@ -97,16 +103,20 @@ def _corrupt(arrays, manifest, case):
         return "occupancy_2 is not the 2x max-pool"
     if case == "G not conservative":
         arrays["G"][:] = 3
-        return "G is not conservative"
+        return "G exceeds its box metric's bound"
+    if case == "G past the centre bound":
+        manifest["G_metric"] = "centre"
+        arrays["G"][:] = 3
+        return "G exceeds its centre metric's bound"
     if case == "bad config":
         manifest["config"] = dict(manifest["config"], L_C=17)
         return "bad config"
     raise AssertionError(case)
 
 
-CASES = ["wrong dtype", "nan", "block index out of range", "unknown version",
-         "wrong format name", "missing array", "wrong shape", "extra array",
-         "mip inconsistent", "G not conservative", "bad config"]
+CASES = ["wrong dtype", "nan", "block index out of range", "unknown version", "no G metric",
+         "unknown G metric", "wrong format name", "missing array", "wrong shape", "extra array",
+         "mip inconsistent", "G not conservative", "G past the centre bound", "bad config"]
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -189,6 +199,39 @@ def test_distance_grid_is_box_distance(G_res):
     np.testing.assert_array_equal(G.reshape(-1), np.minimum(np.floor(box_dist), 255))
     assert np.all(G[occ_g > 0] == 0) and G.max() >= 1
     assert np.all(build_distance_grid(np.zeros_like(occ), G_res) == 255)
+
+
+@pytest.mark.parametrize("G_res", [8, 16])
+def test_centre_metric_is_centre_distance(G_res):
+    """Brute force: the paper's G is the rounded-down distance from a voxel's centre to the
+    nearest occupied G-voxel's centre, never below the box metric's."""
+    rng = np.random.default_rng(G_res + 1)
+    occ = (rng.random((16, 16, 16)) < 0.004).astype(np.uint8)
+    G = build_distance_grid(occ, G_res, "centre")
+    f = 16 // G_res
+    occ_g = occ.reshape(G_res, f, G_res, f, G_res, f).max(axis=(1, 3, 5))
+    vox = np.argwhere(np.ones((G_res,) * 3, bool))
+    occupied = np.argwhere(occ_g)
+    dist = np.sqrt(((vox[:, None, :] - occupied[None, :, :]) ** 2).sum(-1)).min(axis=1)
+    np.testing.assert_array_equal(G.reshape(-1), np.minimum(np.floor(dist), 255))
+    assert np.all(G >= build_distance_grid(occ, G_res)) and np.any(G > build_distance_grid(occ, G_res))
+    with pytest.raises(ValueError, match="G metric 'edt'"):
+        build_distance_grid(occ, G_res, "edt")
+
+
+def test_centre_metric_round_trips_and_version_1_files_load_as_box(model, tmp_path):
+    centre = replace(model, G_metric="centre", arrays=dict(
+        model.arrays, G=build_distance_grid(model.arrays["occupancy_0"], model.config.G_res,
+                                            "centre")))
+    back = load_baked(save_baked(centre, tmp_path / "c.npz"))
+    assert back.G_metric == "centre" and np.array_equal(back.arrays["G"], centre.arrays["G"])
+    with pytest.raises(BakedFormatError, match="box metric's bound"):
+        save_baked(replace(centre, G_metric="box"), tmp_path / "wrong.npz")
+    arrays, manifest = raw_from(model)
+    del manifest["G_metric"]
+    old = write_raw(tmp_path / "v1.npz", arrays, dict(manifest, version=1,
+                                                      arrays=listing(arrays)))
+    assert load_baked(old).G_metric == "box"
 
 
 def test_sparse_coarse_grid_dense_and_callable_agree():

@@ -17,14 +17,16 @@ def test_tables_load(key):
     assert all(set(r.paper) <= set(t.paper_columns) for r in t.rows)
 
 
-def test_table4_rows_are_the_three_marches_against_the_papers_without_G():
+def test_table4_rows_are_the_marches_against_the_papers_without_G():
     t = ablation.load_table("table4")
-    marches = [("paper", False), ("paper", True), ("ours", True)]
-    assert [(r.model["L"], r.render["march"], r.render["use_G"]) for r in t.rows] == [
-        (L, m, g) for L in (2, 3, 4) for m, g in marches]
+    marches = [("paper", False, {}), ("paper", True, {}),
+               ("paper", True, {"G_metric": "centre"}), ("ours", True, {})]
+    assert [(r.model["L"], r.render["march"], r.render["use_G"], r.bake) for r in t.rows] == [
+        (L, m, g, b) for L in (2, 3, 4) for m, g, b in marches]
     assert [r.baseline for r in t.rows] == [
-        b for L in (2, 3, 4) for b in (None, f"L={L} paper w/o G", f"L={L} paper w/o G")]
+        b for L in (2, 3, 4) for b in (None,) + (f"L={L} paper w/o G",) * 3]
     assert t.paired_stage == "march" and t.paired_sizes == ("1920x1080",) and t.same_image
+    assert [t.row_same_image(r) for r in t.rows] == [True, True, False, True] * 3
     assert all(not r.paper for r in t.rows if r.render["march"] == "ours")
 
 
@@ -83,8 +85,8 @@ def test_write_table_puts_paper_figures_beside_ours(tmp_path):
     assert cells[1:3] == ["20.00", "25.67"]          # PSNR ours, paper
     assert cells[3:5] == ["40.0", "85.1"]            # Marching ours, paper
     data = json.loads((tmp_path / "table4.json").read_text())
-    assert data["device"] == "dev" and len(data["rows"]) == 9
-    assert (tmp_path / "table4.csv").read_text().count("\n") == 10
+    assert data["device"] == "dev" and len(data["rows"]) == 12
+    assert (tmp_path / "table4.csv").read_text().count("\n") == 13
     assert (tmp_path / "table4.png").stat().st_size > 1000
     assert (tmp_path / "table4" / "l-2-paper-w-o-g.png").is_file()
     report.write_index(tmp_path)
@@ -108,7 +110,7 @@ def test_speedup_is_baseline_time_over_row_time(tmp_path):
     t = ablation.load_table("table4")
     # w/o G rows take 12 ms, w/ G rows 10 ms: the w/ G rows are 1.2x faster.
     results = [_measured(20.0, 12.0 if not r.render["use_G"] else 10.0) for r in t.rows]
-    assert report.speedups(t, results) == [None, 1.2, 1.2] * 3
+    assert report.speedups(t, results) == [None, 1.2, 1.2, 1.2] * 3
     paper = report.speedups(t, results, key=lambda row, m: row.paper.get("Time (ms)"))
     assert paper[1] == pytest.approx(9.98 / 9.26)
     meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4",
@@ -418,3 +420,15 @@ def test_the_projects_readme_takes_the_summary(tmp_path):
     assert summary.copy_into(readme, "generated") is True
     text = readme.read_text()
     assert f"{summary.BEGIN}\ngenerated\n{summary.END}" in text and "## Usage" in text
+
+
+@pytest.mark.parametrize("ours, paper, verdict", [
+    (0.55, 0.55, "reproduces"), (0.77, 0.55, "reproduces"), (0.80, 0.55, "direction only"),
+    (0.99, 0.55, "direction only"), (1.0, 0.55, "opposite"), (1.16, 0.55, "opposite"),
+    (1.0, 1.0, "reproduces"), (0.98, 1.0, "differs"), (1.6, 1.3, "reproduces")])
+def test_count_verdict_judges_size_as_well_as_direction(ours, paper, verdict):
+    # The rule fixed before the runs: at least half the paper's relative change, its way.
+    from bench.tables.compare import COUNT_SHARE, count_verdict
+
+    assert COUNT_SHARE == 0.5
+    assert count_verdict(ours, paper) == verdict

@@ -22,7 +22,7 @@ import json
 import os
 import shutil
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from filelock import FileLock
@@ -243,6 +243,20 @@ def commit(plan: ModelPlan, files: dict[str, bytes], record: dict) -> None:
     root = plan.folder.parent.parent
     with lock(root / "trainings.jsonl.lock"), open(root / "trainings.jsonl", "a") as log:
         log.write(json.dumps(line) + "\n")
+
+
+def ensure_baked(entry: ModelEntry, method: str, options: dict) -> ModelEntry:
+    """``entry`` with its run baked with ``options`` (the method's ``BAKE_OPTIONS``) into
+    ``model-<name=value,...>.npz`` beside its ``model.npz`` (once, under the model's lock);
+    ``entry`` itself where ``options`` is empty."""
+    if not options:
+        return entry
+    name = ",".join(f"{k}={options[k]}" for k in sorted(options))
+    baked = entry.baked.with_name(f"model-{name}.npz")
+    with lock(entry.baked.parent / ".lock"):
+        if not baked.is_file():
+            methods.get(method).bake_run(entry.run_dir, baked, **options)
+    return replace(entry, baked=baked)
 
 
 def entry(plan: ModelPlan) -> ModelEntry:

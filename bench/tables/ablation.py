@@ -41,6 +41,8 @@ class Row:
     render: dict
     paper: dict = field(default_factory=dict)
     baseline: str | None = None     # name of the row this row's speed-up is measured against
+    bake: dict = field(default_factory=dict)    # the method's BAKE_OPTIONS for this row
+    same_image: bool | None = None  # must render its baseline's image (None: the table's)
 
 
 CLAIMS = ("difference", "equivalent")
@@ -75,7 +77,8 @@ class Table:
     comparisons: tuple[Comparison, ...] = ()
     # Rows with a baseline are timed against it as interleaved pairs (bench.tables.measure
     # .measure_pair) on the renderer's ms_<paired_stage> (None: the frame), at the test
-    # size and at paired_sizes ("WxH"); same_image: a row must render its baseline's image.
+    # size and at paired_sizes ("WxH"); same_image: a row must render its baseline's image
+    # (unless the row says otherwise: Table.row_same_image).
     paired_stage: str | None = None
     paired_sizes: tuple[str, ...] = ()
     same_image: bool = False
@@ -84,6 +87,11 @@ class Table:
     def stem(self) -> str:
         """The name of the table's result files (``results/<stem>.md``)."""
         return file_stem(self.key)
+
+    def row_same_image(self, row: Row) -> bool:
+        """Whether ``row`` must render its baseline's image: the row's ``same_image``, else
+        the table's."""
+        return self.same_image if row.same_image is None else row.same_image
 
 
 def file_stem(key: str) -> str:
@@ -132,21 +140,25 @@ def _row(spec: dict, i: int, r: dict, path: Path) -> Row:
         plugin.check_model_options(model)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{path}: row {i} ({r.get('name')!r}): {exc}") from exc
-    allowed = plugin.Renderer.RENDER_OPTIONS
-    unknown = sorted(set(render) - set(allowed))
-    if unknown:
-        raise ValueError(f"{path}: row {i}: render options {unknown} are not among "
-                         f"{sorted(allowed)} of method {method!r}")
-    try:
-        for name, value in render.items():
-            allowed[name].check(name, value)
-    except ValueError as exc:
-        raise ValueError(f"{path}: row {i} ({r.get('name')!r}): {exc}") from exc
+    bake = dict(r.get("bake", {}))
+    for kind, given, allowed in (
+            ("render", render, plugin.Renderer.RENDER_OPTIONS),
+            ("bake", bake, methods.declared(plugin, "BAKE_OPTIONS"))):
+        unknown = sorted(set(given) - set(allowed))
+        if unknown:
+            raise ValueError(f"{path}: row {i}: {kind} options {unknown} are not among "
+                             f"{sorted(allowed)} of method {method!r}")
+        try:
+            for name, value in given.items():
+                allowed[name].check(name, value)
+        except ValueError as exc:
+            raise ValueError(f"{path}: row {i} ({r.get('name')!r}): {exc}") from exc
     unknown = set(r.get("paper", {})) - set(spec["paper_columns"])
     if unknown:
         raise ValueError(f"{path}: row {i} has paper figures for unknown columns {sorted(unknown)}")
     return Row(name=r["name"], method=method, model=model, render=render,
-               paper=dict(r.get("paper", {})), baseline=r.get("baseline", spec.get("baseline")))
+               paper=dict(r.get("paper", {})), baseline=r.get("baseline", spec.get("baseline")),
+               bake=bake, same_image=r.get("same_image"))
 
 
 def _compare(r: dict, names: set, path: Path) -> list[Comparison]:

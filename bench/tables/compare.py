@@ -72,7 +72,7 @@ def measure(table, results: list) -> list[dict]:
         rec["speedup_paper"] = None if t_row is None or t_against is None else t_against / t_row
         rec["speed_verdict"] = speed_verdict(rec["speedup"], rec["speedup_paper"])
         rec["counts"] = count_claims(row, m, against, b)
-        if table.same_image:      # the row must not change the image: no PSNR verdict
+        if table.row_same_image(row):   # the row must not change the image: no PSNR verdict
             check = m.same_image
             rec["claim"] = "same image"
             rec["verdict"] = ("images not compared" if check is None else "images identical"
@@ -92,23 +92,35 @@ def speed_verdict(ours: dict, paper: float | None) -> str:
     return "within spread"
 
 
+# A count claim's size rule, fixed before any run: ours "reproduces" a paper's change of a
+# count where it moves the same way by at least this share of the paper's relative change.
+COUNT_SHARE = 0.5
+
+
+def count_verdict(ours: float, paper: float) -> str:
+    """Our ratio of a count (row over against) judged against the paper's: where the
+    paper's is unchanged, "reproduces" if ours is too, else "differs"; else "reproduces"
+    where ours moves the paper's way by at least :data:`COUNT_SHARE` of its relative
+    change, "direction only" where it moves that way by less, "opposite" otherwise."""
+    if paper == 1.0:
+        return "reproduces" if ours == 1.0 else "differs"
+    if ours == 1.0 or (ours > 1.0) != (paper > 1.0):
+        return "opposite"
+    return "reproduces" if abs(ours - 1.0) >= COUNT_SHARE * abs(paper - 1.0) \
+        else "direction only"
+
+
 def count_claims(row, m, against, b) -> dict:
     """{statistic: {ours, paper (row over against), verdict}} for the statistics both the
-    paper and our renderer count (Marching, Occupied): exact counts, compared directly;
-    "reproduces" where ours moves the paper's way (or stays equal where the paper's does),
-    else "opposite" / "differs"."""
+    paper and our renderer count (Marching, Occupied, Empty): exact counts, compared
+    directly (:func:`count_verdict`)."""
     out = {}
     for col in m.stats:
         p_row, p_against = row.paper.get(col), against.paper.get(col)
         if p_row is None or not p_against or not b.stats.get(col):
             continue
         ours, paper = m.stats[col] / b.stats[col], p_row / p_against
-        if paper == 1.0:
-            verdict = "reproduces" if ours == 1.0 else "differs"
-        else:
-            verdict = ("reproduces" if ours != 1.0 and (ours > 1.0) == (paper > 1.0)
-                       else "opposite")
-        out[col] = {"ours": ours, "paper": paper, "verdict": verdict}
+        out[col] = {"ours": ours, "paper": paper, "verdict": count_verdict(ours, paper)}
     return out
 
 

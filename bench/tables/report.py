@@ -161,7 +161,8 @@ def _paired_cells(table, results: list, row, m) -> list[str]:
     if table.same_image:
         check = m.same_image
         cells.append("" if check is None else "identical" if check["identical"] is True
-                     else f"**DIFFERS** (max {check['max_diff']:.2g})")
+                     else f"**DIFFERS** (max {check['max_diff']:.2g})"
+                     if table.row_same_image(row) else f"differs (max {check['max_diff']:.2g})")
     return cells
 
 
@@ -176,7 +177,8 @@ def _paired_note(table, results: list) -> str:
             f"row's counts over the baseline's (exact counts, no interval). ")
     if table.same_image:
         note += ("Image vs baseline: every test view rendered by both, compared bit for bit "
-                 "(these rows must not change the image; no PSNR verdict). ")
+                 "(these rows must not change the image; no PSNR verdict; a row that may, "
+                 "such as G of the paper's centre metric, is judged on PSNR and counts). ")
     return note
 
 

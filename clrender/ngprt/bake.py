@@ -89,9 +89,10 @@ def _weights(model: NGPRT) -> dict:
     return {n: getattr(model, n).detach().cpu().numpy().astype(np.float32) for n in names}
 
 
-def bake(model: NGPRT, occupancy_0: np.ndarray, gamma: float):
+def bake(model: NGPRT, occupancy_0: np.ndarray, gamma: float, G_metric: str = "box"):
     """A :class:`clrender.ngprt.baked.BakedModel` of ``model`` with rendering occupancy
-    ``occupancy_0`` ((L_C,)*3 uint8 0/1) and step scaler ``gamma``."""
+    ``occupancy_0`` ((L_C,)*3 uint8 0/1), step scaler ``gamma`` and G of ``G_metric``
+    (:data:`clrender.ngprt.baked.G_METRICS`)."""
     from .baked import BakedModel, build_distance_grid, build_mip, sparse_coarse_grid
 
     cfg = model.cfg
@@ -103,18 +104,18 @@ def bake(model: NGPRT, occupancy_0: np.ndarray, gamma: float):
     mip = build_mip(occupancy_0)
     for lev, grid in enumerate(mip.values() if isinstance(mip, dict) else mip):
         arrays[f"occupancy_{lev}"] = np.asarray(grid, np.uint8)
-    arrays["G"] = build_distance_grid(occupancy_0, cfg.G_res)
-    return BakedModel(cfg, float(gamma), arrays)
+    arrays["G"] = build_distance_grid(occupancy_0, cfg.G_res, G_metric)
+    return BakedModel(cfg, float(gamma), arrays, G_metric)
 
 
 def bake_state(model: NGPRT, occupancy: torch.Tensor, gamma: float, dataset,
-               n_rays: int = CULL_RAYS):
+               n_rays: int = CULL_RAYS, G_metric: str = "box"):
     """A :class:`clrender.ngprt.baked.BakedModel` of an in-memory training state (what
     :func:`bake_run` bakes from a checkpoint): visibility culling of the training
     ``occupancy`` ((L_C,)*3 bool) on ``n_rays`` rays of ``dataset`` (the training Dataset),
     then :func:`bake`. Works on a model in training; changes neither it nor the torch RNG."""
     occupancy_0 = visible_cells(model, occupancy, gamma, dataset, n_rays=n_rays)
-    return bake(model, occupancy_0, gamma)
+    return bake(model, occupancy_0, gamma, G_metric)
 
 
 def trained_on(conf: dict) -> dict:
@@ -122,12 +123,14 @@ def trained_on(conf: dict) -> dict:
     return {"data": conf.get("data"), "downscale": conf.get("downscale", 1)}
 
 
-def bake_run(run_dir, out_path, dataset=None, device=None, n_rays: int = CULL_RAYS) -> Path:
+def bake_run(run_dir, out_path, dataset=None, device=None, n_rays: int = CULL_RAYS,
+             G_metric: str = "box") -> Path:
     """Bake the checkpoint of ``run_dir`` into ``out_path`` (written atomically).
 
     Args:
         dataset: the training Dataset for visibility culling; default: loaded from the
             run's ``config.json``.
+        G_metric: what G measures (:data:`clrender.ngprt.baked.G_METRICS`).
     Returns:
         the path written.
     """
@@ -139,7 +142,7 @@ def bake_run(run_dir, out_path, dataset=None, device=None, n_rays: int = CULL_RA
             raise ValueError(f"{run_dir}/config.json: no data path; pass the dataset")
         from ..data import load_dataset
         dataset = load_dataset(conf["data"], split="train", downscale=conf.get("downscale", 1))
-    baked = bake_state(model, occ, gamma, dataset, n_rays=n_rays)
+    baked = bake_state(model, occ, gamma, dataset, n_rays=n_rays, G_metric=G_metric)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     save_baked(baked, out_path, trained_on=trained_on(conf))

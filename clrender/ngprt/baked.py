@@ -28,7 +28,15 @@ from .config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, MAX_LATTICE_POINT
                      ModelConfig)
 
 FORMAT = "clrender-ngprt"
-VERSION = 1
+# Version 2 records G's metric (``G_metric``); version 1 files hold the box metric's G.
+VERSION = 2
+READ_VERSIONS = (1, 2)
+# What G measures (docs/ngprt.md "The occupancy distance grid G"): ``box``, from a voxel's
+# closest point to the nearest occupied voxel (no point within G of any point of the voxel
+# is occupied: the march takes the samples it takes without G); ``centre``, the paper's,
+# from the voxel's centre to the nearest occupied voxel's centre (longer steps that may
+# pass an occupied sample).
+G_METRICS = ("box", "centre")
 _CHUNK = 1 << 18          # coarse corners evaluated per call of a corner-value callable
 
 
@@ -40,11 +48,13 @@ class BakedModel:
         config: the model's shape.
         gamma: step scaler; the lattice step is ``s = gamma * config.s0`` (S2.3).
         arrays: exactly the arrays of :func:`expected_arrays` (docs/ngprt.md "Baked file").
+        G_metric: what ``G`` measures, one of :data:`G_METRICS`.
     """
 
     config: ModelConfig
     gamma: float
     arrays: dict
+    G_metric: str = "box"
     method = "ngprt"          # its entry-point name (clrender.methods, pyproject.toml)
 
     @property
@@ -111,15 +121,20 @@ def _pool(grid: np.ndarray, res: int) -> np.ndarray:
     return grid.reshape(res, f, res, f, res, f).max(axis=(1, 3, 5))
 
 
-def build_distance_grid(occupancy_0: np.ndarray, G_res: int) -> np.ndarray:
-    """The occupancy distance grid G (paper §4.3), exact and conservative.
+def build_distance_grid(occupancy_0: np.ndarray, G_res: int, metric: str = "box") -> np.ndarray:
+    """The occupancy distance grid G (paper §4.3), in G-voxel units, rounded down.
 
-    A G-voxel is occupied when any ``occupancy_0`` cell inside it is. G stores, rounded
-    down, the distance from the *closest point* of a voxel to the nearest occupied voxel
-    (box-to-box distance, not centre-to-centre as a plain EDT gives): for integer offset
-    ``D`` between the voxels it is ``|max(|D| - 1, 0)|``, which equals the centre EDT to
-    the occupied set dilated by one voxel (3x3x3). So from any point of a voxel every point
-    closer than ``G / G_res`` in u (``2 G / G_res`` world units when bounded) is empty.
+    A G-voxel is occupied when any ``occupancy_0`` cell inside it is. ``metric``:
+
+    * ``box`` (exact and conservative): the distance from the *closest point* of a voxel
+      to the nearest occupied voxel (box to box): for integer offset ``D`` between the
+      voxels ``|max(|D| - 1, 0)|``, the centre EDT to the occupied set dilated by one voxel
+      (3x3x3). From any point of a voxel every point closer than ``G / G_res`` in u
+      (``2 G / G_res`` world units when bounded) is empty.
+    * ``centre`` (the paper's wording): the distance from the voxel's centre to the
+      nearest occupied voxel's centre, a plain EDT; up to about two voxels more than
+      ``box``, so a step may pass an occupied point.
+
     Capped at 255; 255 everywhere when all is empty.
 
     Args:
@@ -130,11 +145,14 @@ def build_distance_grid(occupancy_0: np.ndarray, G_res: int) -> np.ndarray:
     # Imported here: loading and rendering a baked file need numpy and pyopencl alone.
     from scipy.ndimage import binary_dilation, distance_transform_edt
 
+    if metric not in G_METRICS:
+        raise ValueError(f"G metric {metric!r}: expected one of {', '.join(G_METRICS)}")
     occ = _pool((np.asarray(occupancy_0) != 0).astype(np.uint8), G_res).astype(bool)
     if not occ.any():
         return np.full((G_res,) * 3, 255, np.uint8)
-    near = binary_dilation(occ, structure=np.ones((3, 3, 3), bool))
-    return np.minimum(np.floor(distance_transform_edt(~near)), 255).astype(np.uint8)
+    if metric == "box":
+        occ = binary_dilation(occ, structure=np.ones((3, 3, 3), bool))
+    return np.minimum(np.floor(distance_transform_edt(~occ)), 255).astype(np.uint8)
 
 
 def sparse_coarse_grid(corner_values, occupancy_0: np.ndarray, B: int,
@@ -215,11 +233,13 @@ def _check_occupancy(model: BakedModel, where: str):
     if absent.any():
         fail(where, f"{int(absent.sum())} coarse blocks hold occupied occupancy_0 cells "
                      f"but are absent (coarse_block_index == -1)")
-    want_G = build_distance_grid(mip[0], cfg.G_res)
+    if model.G_metric not in G_METRICS:
+        fail(where, f"G_metric {model.G_metric!r}: expected one of {', '.join(G_METRICS)}")
+    want_G = build_distance_grid(mip[0], cfg.G_res, model.G_metric)
     over = model.arrays["G"] > want_G
     if over.any():
-        fail(where, f"G is not conservative: {int(over.sum())} voxels exceed the distance "
-                     f"to the nearest occupied voxel (max excess "
+        fail(where, f"G exceeds its {model.G_metric} metric's bound: {int(over.sum())} "
+                     f"voxels exceed the distance to the nearest occupied voxel (max excess "
                      f"{int((model.arrays['G'].astype(int) - want_G).max())})")
 
 
@@ -254,7 +274,8 @@ def validate(model: BakedModel, where: str = "model") -> None:
     Checks: gamma a finite number > 0 with at most ``MAX_LATTICE_POINTS`` lattice points
     per ray, names, shapes and dtypes of the arrays, finite floats, block indices in
     [-1, n_blocks) with every block referenced once, occupancy 0/1 and a consistent mip,
-    occupied cells in present blocks, G conservative (never above the recomputed G).
+    occupied cells in present blocks, G within its metric's bound (never above G
+    recomputed with ``G_metric``).
     (The config checked its own fields when it was made.) ``where`` (e.g. the file
     name) starts every message.
     """
@@ -279,7 +300,7 @@ def save_baked(model: BakedModel, path, trained_on: dict | None = None) -> Path:
     """
     validate(model, str(path))
     manifest = {"format": FORMAT, "version": VERSION, "config": model.config.to_dict(),
-                "gamma": float(model.gamma)}
+                "gamma": float(model.gamma), "G_metric": model.G_metric}
     if trained_on is not None:
         manifest["trained_on"] = trained_on
     return bakedfile.save(path, manifest, model.arrays)
@@ -288,12 +309,14 @@ def save_baked(model: BakedModel, path, trained_on: dict | None = None) -> Path:
 def load_baked(path) -> BakedModel:
     """Load and validate a baked model; raises :class:`BakedFormatError` naming the file."""
     where = str(path)
-    manifest, arrays = bakedfile.read(path, FORMAT, VERSION, keys=("config", "gamma"))
+    manifest, arrays = bakedfile.read(path, FORMAT, READ_VERSIONS, keys=("config", "gamma"))
+    if manifest["version"] >= 2 and "G_metric" not in manifest:
+        fail(where, f"manifest has no 'G_metric' (version {manifest['version']} records it)")
     try:
         config = ModelConfig.from_dict(manifest["config"], where=f"{where}: config")
     except (TypeError, ValueError) as e:
         raise BakedFormatError(f"{where}: bad config: {e}") from e
-    model = BakedModel(config, manifest["gamma"], arrays)
+    model = BakedModel(config, manifest["gamma"], arrays, manifest.get("G_metric", "box"))
     validate(model, where)
     model.gamma = float(model.gamma)
     return model

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..methods import CONTRACT, Option, PaperSmoke, Stat
-from .baked import FORMAT, load_baked
+from .baked import FORMAT, G_METRICS, load_baked
 from .config import PRESETS as _MODEL_PRESETS, VARIANTS
 from .engine import ENGINES
 from .marches import MARCHES
@@ -23,6 +23,12 @@ TRAIN_OPTIONS = {
     "engine": Option(str, "fast", "training engine: fast (fused C++ stages, CPU; elsewhere "
                      "the torch engine) or torch (autograd, the reference)", choices=ENGINES),
 }
+BAKE_OPTIONS = {
+    "G_metric": Option(str, "box", "what the occupancy distance grid G measures: box (from a "
+                       "voxel's closest point: the march with G takes the samples it takes "
+                       "without) or centre (the paper's, from the voxel's centre: longer steps)",
+                       choices=G_METRICS, flag="--G-metric"),
+}
 TEACHER = None
 ABLATIONS = Path(__file__).resolve().parent / "ablations"
 CURVE_TABLE = "table2"
@@ -34,7 +40,8 @@ SOURCES = tuple(Path(__file__).resolve().parent / f for f in (
     "config.py", "model.py", "torch_ops.py", "encoding.py", "space.py", "train.py",
     "engine.py", "fused.py", "fused_grid.cpp", "stages.py", "bake.py", "baked.py"))
 
-__all__ = ["CONTRACT", "FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER",
+__all__ = ["CONTRACT", "FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "BAKE_OPTIONS",
+           "TEACHER",
            "ABLATIONS", "CURVE_TABLE", "LEGACY_RUNS", "SOURCES", "PAPER_SMOKE", "Renderer",
            "load_baked", "train", "train_steps", "bake_run", "check_model_options",
            "model_spec", "add_commands", "example_model"]
@@ -51,6 +58,8 @@ class Renderer(_CLRenderer):
                                       "coarse to fine, Eq. 9)", choices=MARCHES)}
     SCALAR_STATS = {"Marching": Stat("n_march", "{:.1f}", "marching points per ray"),
                     "Occupied": Stat("n_occ", "{:.1f}", "occupied samples per ray"),
+                    "Empty": Stat("n_empty", "{:.1f}", "empty marching points per ray "
+                                  "(marching minus occupied)"),
                     "Reads": Stat("n_reads", "{:.1f}", "global-memory reads per ray: "
                                   "occupancy, G, feature corners"),
                     "Skip reads": Stat("n_skip_reads", "{:.1f}",
@@ -100,10 +109,13 @@ def train_steps(preset: str, iterations: int | None = None) -> tuple[int, int]:
     return (tcfg.iterations if iterations is None else int(iterations)), tcfg.log_every
 
 
-def bake_run(run_dir, out_path):
+def bake_run(run_dir, out_path, **options):
+    """Bake a run folder; ``options``: :data:`BAKE_OPTIONS`."""
     from .bake import bake_run as bake
 
-    return bake(run_dir, out_path)
+    for name, value in options.items():
+        BAKE_OPTIONS[name].check(name, value)
+    return bake(run_dir, out_path, **options)
 
 
 def check_model_options(options: dict) -> None:

@@ -363,7 +363,8 @@ class Renderer:
             dict with ``rgb`` (H, W, 3) float32 in [0, 1]; ``ms_march``, ``ms_deferred``:
             kernel times in milliseconds (read after the outputs: the reads are the only
             calls that wait for the device) and ``ms`` their sum. With ``stats``: ``n_march``,
-            ``n_occ`` (H, W) int32 marching points and occupied samples per ray; ``depth``
+            ``n_occ`` (H, W) int32 marching points and occupied samples per ray, ``n_empty``
+            their difference (empty points, where the march skips); ``depth``
             (H, W) float32 world units along the ray (0 where nothing was hit); ``opacity``
             (H, W) float32; with ``count_reads`` (the counting build's times)
             ``reads_<kind>`` per :data:`marches.READ_KINDS`, ``n_reads`` their sum and
@@ -386,6 +387,7 @@ class Renderer:
                 n_occ=self._read(out["n_occ"], (h, w), np.int32),
                 depth=self._read(out["depth"], (h, w), F32),
                 opacity=self._read(out["feat"], (n, 8), F32)[:, 7].reshape(h, w).copy())
+            result["n_empty"] = result["n_march"] - result["n_occ"]
         if counted:
             reads = self._read(out["reads"], (h, w, len(READ_KINDS)), np.int32)
             result.update({f"reads_{kind}": reads[..., i].copy()
