@@ -382,6 +382,17 @@ def test_cli_and_api_from_run_to_video(tiny_run, tmp_path, capsys):
     assert rgb.shape == (cam.height, cam.width, 3) and rgb.dtype == np.float32
     assert stats["n_occ"].sum() > 0 and np.all(stats["n_march"] >= stats["n_occ"])
     np.testing.assert_array_equal(rgb, clrender.render(clrender.load(model), cam))
+    centre = tmp_path / "centre.npz"
+    assert cli.main(["bake", str(tiny_run["run"]), "--out", str(centre), "--G-metric",
+                     "centre"]) == 0
+    box_model, centre_model = clrender.load(model), clrender.load(centre)
+    assert (box_model.G_metric, centre_model.G_metric) == ("box", "centre")
+    for name, a in box_model.arrays.items():     # the same bake but for G
+        assert np.array_equal(a, centre_model.arrays[name]) or name == "G", name
+    assert np.all(centre_model.arrays["G"] >= box_model.arrays["G"])
+    with pytest.raises(SystemExit):             # argparse: not one of the choices
+        cli.main(["bake", str(tiny_run["run"]), "--out", str(tmp_path / "x.npz"),
+                  "--G-metric", "chebyshev"])
 
 
 @pytest.mark.slow
