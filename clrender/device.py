@@ -20,7 +20,9 @@ Programs are built from ``kernels/*.cl`` with ``-D`` specialisation and cached p
 (source text, options, device); kernels are fetched from a built program once. Each
 program has two builds: the exact one (:func:`exact_options`, what the tests compare with
 the numpy references) and the fast one (:data:`FAST_OPTIONS`, for rendering). On the
-Oclgrind simulator both also get ``-D OCLGRIND`` (:func:`platform_defines`).
+Oclgrind simulator both also get ``-D OCLGRIND`` (:func:`platform_defines`). A build's
+compiler-output warning stands unless its log is only a driver's informational lines
+(clrender/buildlog.py).
 """
 from __future__ import annotations
 
@@ -31,7 +33,7 @@ from importlib import resources
 
 import numpy as np
 
-from . import icd
+from . import buildlog, icd
 
 icd.register()  # before the first platform query (see clrender/icd.py)
 import pyopencl as cl  # noqa: E402
@@ -237,7 +239,7 @@ def _compiles(device: cl.Device) -> bool:
     'generic'"); the default choice skips such a device rather than failing later."""
     try:
         ctx = cl.Context([device])
-        cl.Program(ctx, "__kernel void k(__global float *a) { a[0] = 1.0f; }").build()
+        buildlog.build(ctx, "__kernel void k(__global float *a) { a[0] = 1.0f; }")
         return True
     except cl.Error:
         return False
@@ -271,7 +273,7 @@ def _divide_sqrt_mismatches(device: cl.Device) -> int:
     mf = cl.mem_flags
     bufs = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=x) for x in (a, b)]
     out = cl.Buffer(ctx, mf.WRITE_ONLY, 2 * a.nbytes)
-    kernel = cl.Kernel(cl.Program(ctx, _PROBE).build(), "probe")
+    kernel = cl.Kernel(buildlog.build(ctx, _PROBE), "probe")
     kernel(queue, a.shape, None, *bufs, out)
     got = np.empty(2 * len(a), np.float32)
     cl.enqueue_copy(queue, got, out)
@@ -333,7 +335,7 @@ def _build(runtime: Runtime, source_name: str, options: tuple[str, ...],
             source, where, include = f.read(), path, source_dir
     opts = list(options) + [f"-I{include}"]
     try:
-        program = cl.Program(runtime.context, source).build(options=opts)
+        program = buildlog.build(runtime.context, source, opts)  # Intel's log: clrender/buildlog.py
     except cl.RuntimeError as exc:
         raise RuntimeError(f"{where}: build failed with {' '.join(options)}:\n{exc}") from exc
     return Program(program)

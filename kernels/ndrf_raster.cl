@@ -96,8 +96,8 @@ typedef int16 lint;
 #define RAY_B(width) (((width) + TS - 1) / TS * TS)
 
 /* Triangle setup, LANES triangles a work-item, one per lane (on PoCL a scalar work-item
- * per triangle ran 2x slower than 16 lanes: calls and gathers do not vectorise across
- * work-items). Points and vectors are 3 lfloat (x, y, z), one triangle a lane; every
+ * per triangle is slower: calls and gathers do not vectorise across work-items;
+ * docs/rendering.md, "One triangle a setup work-item on GPUs"). Points and vectors are 3 lfloat (x, y, z), one triangle a lane; every
  * lane computes with the float32 operations of the scalar version (LANES = 1), in the
  * same order. */
 

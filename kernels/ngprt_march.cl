@@ -126,8 +126,9 @@ inline void ngp_write_pixel(const v_rays *r, int j, int n, __global float *feat,
 }
 
 /* vec_type_hint: the lanes are explicit (RAYS rays a work-item). Without it Intel's CPU
- * compiler scalarises the vectors and re-vectorises across work-items: 17x slower at 16
- * lanes (docs/performance.md, "Speed side by side"). A hint: it changes no result. */
+ * compiler scalarises the vectors and re-vectorises across work-items, far slower at 16
+ * lanes (docs/vendors.md, "Each kernel in its own lanes on both"). A hint: it changes no
+ * result. */
 __kernel __attribute__((vec_type_hint(vfloat)))
 void ngprt_march(__global const float *cam, const int width, const int height,
                  const float s, const float near, const float far,
@@ -164,8 +165,8 @@ void ngprt_march(__global const float *cam, const int width, const int height,
         const vint sample = active & VMASK(CODE_LEVEL(code) == 0);
         const vint empty = active & ~sample;
         /* Both counters here, outside the branches: counted inside v_composite, Intel's
-         * CPU compiler (2026.2, RAYS = 1, no G) lost n_occ (docs/performance.md "Vendor
-         * notes"). */
+         * CPU compiler (RAYS = 1, no G) lost n_occ (docs/vendors.md, "Intel lost the
+         * march's sample count"). */
         r.n_march = v_inc(r.n_march, active);
         r.n_occ = v_inc(r.n_occ, sample);
 #if COUNT_READS

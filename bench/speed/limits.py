@@ -18,6 +18,7 @@ import functools
 import numpy as np
 import pyopencl as cl
 
+from clrender import buildlog
 from clrender.device import event_ms, get_runtime, padded, work_group_size
 
 F8_BYTES = 32
@@ -73,7 +74,7 @@ FLOP_CHAINS = 24
 def _program(runtime, streams: int = 1, contract: bool = False):
     opts = ["-cl-mad-enable", f"-DGATHER_STREAMS={streams}", f"-DFLOP_CHAINS={FLOP_CHAINS}",
             f"-DCONTRACT={int(contract)}"]
-    prg = cl.Program(runtime.context, SOURCE).build(options=opts)
+    prg = buildlog.build(runtime.context, SOURCE, opts)
     return {"gather8": prg.gather8, "flops": prg.flops}
 
 

@@ -199,27 +199,39 @@ def _lpips_note(table, results: list) -> str:
 
 
 def _plot(table, results: list) -> bytes:
+    """Time against PSNR, ours and the paper's side by side. Each row keeps one marker and
+    colour in both panels and is named once in a shared legend below them (labels beside
+    the points overlapped where rows share a time or a PSNR); markers are hollow and drawn
+    larger first, so rows on the same point stay visible."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    n = len(table.rows)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     series = [("ours", [m.time["median"] for m in results], [m.psnr for m in results]),
               ("paper", [r.paper.get("Time (ms)") for r in table.rows],
                [r.paper.get("PSNR") for r in table.rows])]
+    markers, colours = "osD^vPX*hp<>", plt.get_cmap("tab20").colors
+    handles = {}
     for ax, (who, xs, ys) in zip(axes, series):
-        for row, x, y in zip(table.rows, xs, ys):
+        for i, (row, x, y) in enumerate(zip(table.rows, xs, ys)):
             if x is not None and y is not None:
-                ax.scatter(x, y)
-                ax.annotate(row.name, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=8)
+                handles[row.name] = ax.scatter(
+                    x, y, s=110 - 60 * i / max(n - 1, 1), marker=markers[i % len(markers)],
+                    facecolors="none", edgecolors=colours[i % len(colours)], linewidths=1.5,
+                    label=row.name)
         ax.set_xlabel("time per frame (ms)")
         ax.set_ylabel("PSNR (dB)")
         ax.set_title(f"{table.key}: {who}")
         ax.grid(alpha=0.3)
+    names = [r.name for r in table.rows if r.name in handles]
     fig.tight_layout()
+    fig.legend([handles[k] for k in names], names, loc="upper center", ncol=3, fontsize=8,
+               frameon=False, bbox_to_anchor=(0.5, 0.0))
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     return buf.getvalue()
 

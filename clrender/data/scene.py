@@ -38,10 +38,9 @@ PALETTE = np.array([[0.85, 0.15, 0.1], [0.1, 0.45, 0.85], [0.95, 0.7, 0.1], [0.1
                     [0.6, 0.2, 0.7], [0.95, 0.45, 0.1], [0.1, 0.7, 0.7], [0.8, 0.2, 0.5],
                     [0.25, 0.2, 0.15], [0.5, 0.75, 0.2], [0.2, 0.25, 0.6], [0.55, 0.35, 0.2]], F32)
 # Rays per pixel side (a box filter over the pixel). The finest grain and the checker edges
-# lie above a 200x200 view's Nyquist rate, so 2x2 left aliasing that differs from view to
-# view, which no 3D model can fit: against 8x8, 2x2 test views score 27.7-34.9 dB PSNR and
-# 4x4 33.0-42.8 dB (4 views); one ray per pixel centre scores 22.3 dB against 2x2 (bounded,
-# seed 0). Trained on 2x2 images the cpu preset stalled near 24.6 dB whatever the method.
+# lie above a 200x200 view's Nyquist rate, so fewer rays left aliasing that differs from
+# view to view, which no 3D model can fit, and capped every method's test PSNR
+# (docs/results.md, "The built-in scene").
 SUPERSAMPLE = 8
 AMBIENT = 0.25
 

@@ -83,14 +83,13 @@ class TrainConfig:
     log_every: int = 100
 
 
-# Short runs take ten times larger steps, decaying over the same two decades (measured on
-# a 40x40 built-in bounded scene after 1500 steps: test PSNR 15.5 dB with 1e-2, 14.9 with
-# 1e-3; at 200x200, 3e-2 gave no more than 1e-2).
+# Short runs take ten times larger steps, decaying over the same two decades (why:
+# docs/training.md, "NDRF training").
 TRAIN_PRESETS: dict[str, TrainConfig] = {
     "paper": TrainConfig(),
-    # Full 200x200 frames (~22 ms a step, ~2 min a duplex run with extraction, on 2 quiet
-    # cores); 200k faces per mesh measured no better than 60k at this resolution and step
-    # count, at twice the time per step.
+    # Full 200x200 frames, a duplex run in minutes on 2 CPU cores; 60k faces per mesh, as
+    # good as more at this resolution and step count for less time a step
+    # (docs/training.md, "NDRF training").
     "cpu": TrainConfig(iterations=5000, n_distill=200, patch=0, lr=1e-2, lr_final=1e-4,
                        extract="cpu", face_budget=60_000, checkpoint_every=500, log_every=25),
     # CI: the whole run, extraction included, in well under a minute on 2 cores.

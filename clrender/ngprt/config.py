@@ -229,28 +229,22 @@ def _size_problems(c: ModelConfig) -> list[str]:
     return problems
 
 
-# The cpu preset trains the built-in bounded scene on 2 CPU cores in about 1.5 minutes
-# (L = 2, fast engine; 1.4-1.6 minutes for L = 2 / 3 / 4, 27.3-27.8 dB, table4
-# 2026-12-04). The step is what a short run's quality turns on: L_C = 128 with
-# step_res = 2 L_C gives s0 = 0.0135, a quarter of the former L_C = 64 step (0.054, ~5
-# pixels of a 200x200 view, which blurred fine texture and thin twigs). Measured on the built-in scenes
-# (8x8 supersampled), seed 0, 1000 steps: bounded 26.97 dB at step_res = L_C and 2^14
-# samples a batch, 27.60 dB at 2 L_C and 2^15 samples; unbounded, whose rays carry
-# twice the samples at one step, 24.21 -> 23.76 dB (a batch then holds ~540 rays).
-# G_res = L_C / 2, as the paper's.
+# cpu: the paper tables, the main job and NDRF teachers, a model in minutes on 2 CPU cores
+# (fast engine). The step is what a short run's quality turns on: L_C = 128 with
+# step_res = 2 L_C gives s0 = 0.0135, fine enough for the built-in scene's fine texture
+# and thin twigs, which a coarser step blurs. G_res = L_C / 2, as the paper's. Measured:
+# docs/training.md, "Presets".
 _CPU = ModelConfig(L_C=128, step_res=256, log2_T=18, G_res=64, aux_levels=4, aux_log2_T=17)
 PRESETS: dict[str, ModelConfig] = {
     # The paper's sizes (S2.1, S2.5).
     "paper": ModelConfig(L_C=512, log2_T=22, G_res=256, aux_log2_T=21),
     "cpu": _CPU,
-    # Real captures, 10-14 minutes of training on 2 CPU cores (fast engine): the cpu
-    # model with 2^19-entry fine tables. Chosen on the NeRF-synthetic lego at 800x800 at
-    # equal minutes (seed 0, every 3rd of its 13 held-out views; docs/performance.md,
-    # "Presets"): cpu sizes 28.85 dB after 3.3 minutes, 2^19 tables 29.16 dB after 3.9,
-    # L_C = 256 (step_res 512, G_res 128, 2^19 / 2^18 tables) 28.16 dB after 3.5: its
-    # steps cost 2.3x, so fewer of them fit (the 256^3 occupancy update and twice the
-    # samples a ray). Larger tables were not tried (DESIGN.md: gathers beyond
-    # the 32 MB last-level cache run 3-5x slower).
+    # cpu-long: real captures, about ten minutes of training on 2 CPU cores (fast engine).
+    # The cpu model with 2^19-entry fine tables, chosen at equal minutes against the cpu
+    # sizes and L_C = 256, whose costlier steps (a 256^3 occupancy update, twice the
+    # samples a ray) fit fewer into the time (docs/training.md, "Choosing cpu-long").
+    # Larger tables were not tried: gathers from tables beyond the last-level cache are
+    # several times slower (docs/vendors.md, "PoCL facts the kernels rely on").
     "cpu-long": replace(_CPU, log2_T=19),
     # For tests: trains in well under a minute.
     "tiny": ModelConfig(L_C=32, log2_T=14, G_res=16, aux_levels=3, aux_log2_T=14),

@@ -45,8 +45,8 @@ def lane_width(device, cap: int = 16) -> int:
     AVX2, 16 on AVX-512), elsewhere its preferred one (1 on GPUs, where work-items are the
     SIMD lanes). Not a CPU's preferred width: Intel's CPU runtime reports 1 there (it
     vectorises across work-items), yet with the kernels' lanes declared by
-    ``vec_type_hint`` it keeps them and marches 3.2x faster at 16 lanes than at 1
-    (docs/performance.md, "Speed side by side")."""
+    ``vec_type_hint`` it keeps them and marches faster at 16 lanes than at 1
+    (docs/vendors.md, "Each kernel in its own lanes on both")."""
     width = int(device.native_vector_width_float if device_type_name(device) == "CPU"
                 else device.preferred_vector_width_float)
     width = max(1, width)

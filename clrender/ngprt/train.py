@@ -77,19 +77,20 @@ class TrainConfig:
 
 # The cpu preset. Short runs visit each cell far fewer times than 100k iterations would, so the
 # occupancy EMA decays faster to prune empty space within the run. An update of the
-# cpu preset's 128^3 grid costs ~2 s (its 129^3 coarse corners, a quarter of the
-# cells at random and as many occupied ones), so it runs every 64 steps; 0.36 = 0.6^2
-# keeps the decay per step of the former update every 32.
+# cpu preset's 128^3 grid is costly (its 129^3 coarse corners, a quarter of the cells at
+# random and as many occupied ones), so it runs every 64 steps; 0.36 = 0.6^2 keeps the
+# decay per step of an update every 32 steps with decay 0.6.
 # 2^15 samples a batch: the cpu model's step (step_res = 2 L_C) puts ~30 on a bounded
-# ray, so a batch holds ~2700 rays (2^14 held ~1350 and lost 0.5 dB, measured).
+# ray, so a batch holds ~2700 rays; half as many rays a batch lost quality
+# (docs/training.md, "Presets").
 _CPU = TrainConfig(iterations=1000, max_rays=4096, target_samples=1 << 15, occ_every=64,
                    occ_warmup=128, occ_decay=0.36, occ_fraction=0.25, checkpoint_every=250,
                    log_every=25)
 TRAIN_PRESETS: dict[str, TrainConfig] = {
     "paper": TrainConfig(),
     "cpu": _CPU,
-    # The cpu counts for 10-14 minutes of fast-engine steps (measured: 66 ms a step on the
-    # lego at 800x800 with 2^19 tables, 91 ms on the unbounded bonsai at 400x266).
+    # The cpu counts for about ten minutes of fast-engine steps on a real capture
+    # (docs/training.md, "Presets": the time a step on the lego and the bonsai).
     "cpu-long": replace(_CPU, iterations=9000, checkpoint_every=1000, log_every=50),
     "tiny": TrainConfig(iterations=300, max_rays=1024, target_samples=1 << 13, occ_every=16,
                         occ_warmup=32, occ_decay=0.6, occ_fraction=0.5, checkpoint_every=300,
@@ -286,9 +287,8 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
 
 def make_optimizer(model: NGPRT, tcfg: TrainConfig) -> torch.optim.Adam:
     """Adam over every parameter (S2.4); on the CPU torch's fused Adam, the same update in
-    one pass (3.7x faster than the default for the cpu model's 6 M parameters, 4.2 vs
-    15.7 ms a step, measured on a shared machine; parameters within 6e-8 of the default's
-    after 12 steps)."""
+    one pass, several times faster than the default, the parameters equal to the default's
+    within rounding (docs/training.md, "Adam")."""
     cpu = all(p.device.type == "cpu" for p in model.parameters())
     return torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas),
                             eps=tcfg.eps, fused=True if cpu else None)
