@@ -257,7 +257,8 @@ def test_transparent_photos_are_composited_on_white_and_flag_an_object(tmp_path)
     info = copy_photos(src, dest)
     assert info["transparent"] and info["given"] == 3
     out = iio.imread(dest / "r_0.png")
-    assert out.shape == (8, 8, 3) and (out[0, 0] == 255).all() and (out[3, 3] == [200, 10, 10]).all()
+    assert out.shape == (8, 8, 3) and (out[0, 0] == 255).all()
+    assert (out[3, 3] == [200, 10, 10]).all()
 
 
 def test_scene_box_holds_the_points_but_outliers():

@@ -25,8 +25,8 @@ from pathlib import Path
 from ..atomic import atomic_folder, write_atomic
 from . import sfm
 from .frames import copy_photos
-from .video import VIDEO_SUFFIXES, extract_frames
 from .output import write_output
+from .video import VIDEO_SUFFIXES, extract_frames
 
 STAGES = ("frames", "features", "matching", "mapping", "undistortion", "output")
 EXHAUSTIVE_MAX = 300     # photos beyond this are matched sequentially (pairs grow as N^2)
@@ -147,14 +147,17 @@ def _frames(src: Path, work: Path, is_video: bool, max_frames: int) -> dict:
 def _database(db: Path, start: Path | None, fill) -> dict:
     """``fill(tmp)`` on a copy of ``start`` (or a new database), then renamed to ``db``."""
     tmp = db.with_name(f".{db.name}.tmp")
-    tmp.unlink(missing_ok=True)
+    leftovers = [tmp.with_name(tmp.name + s) for s in ("", "-wal", "-shm")]  # SQLite's
+    for f in leftovers:
+        f.unlink(missing_ok=True)
     if start is not None:
         shutil.copyfile(start, tmp)
     try:
         info = fill(tmp)
         os.replace(tmp, db)
     finally:
-        tmp.unlink(missing_ok=True)
+        for f in leftovers:
+            f.unlink(missing_ok=True)
     return info or {}
 
 

@@ -54,15 +54,18 @@ def match(db: Path, sequential: bool, threads: int, overlap: int = 10) -> int:
     else:
         pairs = list(itertools.combinations(names, 2))
     pairs_file = db.with_suffix(".pairs.txt")
-    with tqdm(total=len(pairs), desc="matching", unit="pair", disable=None) as bar:
-        for i in range(0, len(pairs), MATCH_BLOCK):
-            block = pairs[i:i + MATCH_BLOCK]
-            pairs_file.write_text("".join(f"{a} {b}\n" for a, b in block))
-            pycolmap.match_image_pairs(
-                db, matching_options=options, device=pycolmap.Device.cpu,
-                pairing_options=pycolmap.ImportedPairingOptions(match_list_path=pairs_file))
-            bar.update(len(block))
-    pairs_file.unlink()
+    try:
+        with tqdm(total=len(pairs), desc="matching", unit="pair", disable=None) as bar:
+            for i in range(0, len(pairs), MATCH_BLOCK):
+                block = pairs[i:i + MATCH_BLOCK]
+                pairs_file.write_text("".join(f"{a} {b}\n" for a, b in block))
+                pycolmap.match_image_pairs(
+                    db, matching_options=options, device=pycolmap.Device.cpu,
+                    pairing_options=pycolmap.ImportedPairingOptions(
+                        match_list_path=pairs_file))
+                bar.update(len(block))
+    finally:
+        pairs_file.unlink(missing_ok=True)
     return len(pairs)
 
 
