@@ -287,3 +287,8 @@ def test_colmap_loader_refuses_a_malformed_marker(tmp_path):
     (tmp_path / "clrender.json").write_text(json.dumps({"scene": "bounded", "scale": -1}))
     with pytest.raises(ValueError, match="clrender.json: expected"):
         scan_dataset(tmp_path, "train")
+
+
+def test_sequential_steps_are_the_overlap_then_powers_of_two():
+    assert sfm.sequential_steps(3) == [1, 2, 3, 4, 8]
+    assert sfm.sequential_steps(10)[-3:] == [256, 512, 1024]

@@ -18,8 +18,10 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import sqlite3
 import sys
 import time
+from contextlib import closing
 from pathlib import Path
 
 from ..atomic import atomic_folder, write_atomic
@@ -154,6 +156,8 @@ def _database(db: Path, start: Path | None, fill) -> dict:
         shutil.copyfile(start, tmp)
     try:
         info = fill(tmp)
+        with closing(sqlite3.connect(tmp)) as con:     # the WAL into the file, then move it
+            con.execute("PRAGMA wal_checkpoint(TRUNCATE)")
         os.replace(tmp, db)
     finally:
         for f in leftovers:

@@ -45,12 +45,13 @@ def extract(db: Path, images: Path, threads: int) -> None:
 
 def match(db: Path, sequential: bool, threads: int, overlap: int = 10) -> int:
     """Match and geometrically verify image pairs of ``db``: every pair (exhaustive), or
-    each image with its ``overlap`` successors by name (sequential, for video).
+    each image with those :func:`sequential_steps` after it by name (sequential, video).
     Returns the number of pairs matched."""
     options = pycolmap.FeatureMatchingOptions(num_threads=threads)
     names = sorted(im.name for im in _images(db))
     if sequential:
-        pairs = [(a, b) for i, a in enumerate(names) for b in names[i + 1:i + 1 + overlap]]
+        pairs = [(names[i], names[i + d]) for i in range(len(names))
+                 for d in sequential_steps(overlap) if i + d < len(names)]
     else:
         pairs = list(itertools.combinations(names, 2))
     pairs_file = db.with_suffix(".pairs.txt")
@@ -67,6 +68,12 @@ def match(db: Path, sequential: bool, threads: int, overlap: int = 10) -> int:
     finally:
         pairs_file.unlink(missing_ok=True)
     return len(pairs)
+
+
+def sequential_steps(overlap: int) -> list[int]:
+    """Frame steps matched in sequential mode: 1..overlap, then 2^k beyond it up to
+    2^overlap (COLMAP's quadratic overlap: far pairs tie the sequence against drift)."""
+    return sorted(set(range(1, overlap + 1)) | {2 ** k for k in range(overlap + 1)})
 
 
 def _images(db: Path):
