@@ -26,7 +26,7 @@ from pathlib import Path
 
 from ..atomic import atomic_folder, write_atomic
 from . import sfm
-from .frames import copy_photos
+from .frames import MIN_FRAMES, copy_photos
 from .output import write_output
 from .video import VIDEO_SUFFIXES, extract_frames
 
@@ -176,11 +176,13 @@ def _mapping(work: Path, threads: int, seed: int, given: int) -> dict:
         shutil.rmtree(work / "sparse")
     atomic_folder(work / "sparse", write)
     models = {k: sfm.model_summary(r) for k, r in found.items()}
-    if not models or max(m["registered"] for m in models.values()) == 0:
+    best = max((m["registered"] for m in models.values()), default=0)
+    if best < MIN_FRAMES:
         shutil.rmtree(work / "sparse")
-        raise ValueError(f"{work / 'frames'}: structure from motion registered none of the "
-                         f"{given} images (too few matching features: little texture, little "
-                         "overlap between views, or unrelated photos)")
+        raise ValueError(f"{work / 'frames'}: structure from motion registered "
+                         f"{'none' if best == 0 else f'only {best}'} of the {given} images "
+                         f"(at least {MIN_FRAMES} needed; too few matching features: little "
+                         "texture, little overlap between views, or unrelated photos)")
     chosen = max(models, key=lambda k: models[k]["registered"])
     left_out = given - models[chosen]["registered"]
     if len(models) > 1:
