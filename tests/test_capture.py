@@ -15,7 +15,7 @@ from scipy.ndimage import gaussian_filter
 from clrender.capture import capture, pose_errors, sfm, umeyama
 from clrender.capture.box import scene_box
 from clrender.capture.frames import copy_photos
-from clrender.capture.video import extract_frames, window_picks
+from clrender.capture.video import window_picks
 from clrender.data import load_dataset, scan_dataset
 from clrender.data.colmap import OPENCV_TO_NERF, read_model
 
@@ -106,6 +106,7 @@ def test_capture_recovers_the_poses_of_photos(captured, photos):
     out, report = captured
     assert (report["given"], report["registered"], report["models"]) == (VIEWS, VIEWS, 1)
     assert report["matcher"] == "exhaustive" and report["points3D"] > 100
+    assert report["camera"]["model"] == sfm.CAMERA_MODEL
     assert set(report["stages"]) == {"frames", "features", "matching", "mapping",
                                      "undistortion", "output"}
     assert_poses_recovered(out, photos[1])
@@ -292,3 +293,15 @@ def test_colmap_loader_refuses_a_malformed_marker(tmp_path):
 def test_sequential_steps_are_the_overlap_then_powers_of_two():
     assert sfm.sequential_steps(3) == [1, 2, 3, 4, 8]
     assert sfm.sequential_steps(10)[-3:] == [256, 512, 1024]
+
+
+def test_cli_prints_the_report_and_names_bad_input(captured, photos, tmp_path, capsys):
+    from clrender.cli import main
+
+    out, _ = captured
+    assert main(["capture", str(photos[0]), "--out", str(out), "--bounded",
+                 "--downscale", "2"]) == 0
+    printed = capsys.readouterr().out
+    assert f"registered {VIEWS} of {VIEWS} images" in printed and "camera SIMPLE_RADIAL" in printed
+    assert main(["capture", str(tmp_path / "nowhere"), "--out", str(tmp_path / "d")]) == 2
+    assert "nowhere: no such folder or video" in capsys.readouterr().err

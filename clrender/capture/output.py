@@ -93,6 +93,10 @@ def format_report(report: dict) -> str:
              f"reprojection error {report['reprojection_error_px']:.3f} px",
              f"{report['matcher']} matching, {report['threads']} threads, scene "
              f"{report['scene']}"]
+    camera = report.get("camera")
+    if camera:      # a focal length far from the photos' field of view flags a bad model
+        lines.append(f"camera {camera['model']} {camera['width']}x{camera['height']}, "
+                     f"parameters {', '.join(f'{p:.4g}' for p in camera['params'])}")
     for name, t in report["stages"].items():
         seconds = "-" if t["seconds"] is None else f"{t['seconds']:.1f} s"
         lines.append(f"  {name:13s} {seconds}{' (done before, skipped)' if t['skipped'] else ''}")

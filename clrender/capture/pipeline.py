@@ -90,6 +90,7 @@ def capture(src, out, max_frames: int = 200, matcher: str = "auto", bounded=None
     report = {"given": info["given"], "source": info["source"], "threads": threads,
               **{k: mapped[k] for k in ("registered", "reprojection_error_px", "points3D",
                                         "models", "left_out")},
+              "camera": mapped.get("camera"),
               "scene": "bounded" if is_bounded else "unbounded",
               "matcher": run.info("matching")["matcher"], "downscale": downscale}
     run.stage("output", lambda: write_output(work, out, report, run.times, force))

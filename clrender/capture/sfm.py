@@ -97,9 +97,14 @@ def reconstruct(db: Path, images: Path, out: Path, threads: int, seed: int = 0) 
 
 
 def model_summary(rec) -> dict:
-    """{"registered", "points3D", "reprojection_error_px"} of a Reconstruction."""
+    """{"registered", "points3D", "reprojection_error_px", "camera": {"model", "params"}}
+    of a Reconstruction (its first camera: the shared one)."""
+    camera = next(iter(rec.cameras.values()), None)
     return {"registered": rec.num_reg_images(), "points3D": rec.num_points3D(),
-            "reprojection_error_px": float(rec.compute_mean_reprojection_error())}
+            "reprojection_error_px": float(rec.compute_mean_reprojection_error()),
+            "camera": None if camera is None else {
+                "model": camera.model.name, "width": camera.width, "height": camera.height,
+                "params": [float(p) for p in camera.params]}}
 
 
 def undistort(model: Path, images: Path, out: Path, threads: int) -> None:
