@@ -54,6 +54,19 @@ def _cmd_data_check(args) -> int:
     return 0
 
 
+def _cmd_capture(args) -> int:
+    from .capture import capture
+    from .capture.output import format_report
+
+    report = capture(args.src, args.out, max_frames=args.frames, matcher=args.matcher,
+                     bounded=args.bounded, downscale=args.downscale, force=args.force,
+                     threads=args.threads)
+    print(format_report(report))
+    print(f"wrote {args.out} (train with: clrender train {args.out} --out RUN"
+          f"{f' --downscale {args.downscale}' if args.downscale else ''})")
+    return 0
+
+
 def _add_downscale(parser, default, help_default: str) -> None:
     parser.add_argument("--downscale", type=cliopts.whole_number(), default=default,
                         metavar="N",
@@ -154,6 +167,24 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("dir")
     _add_downscale(c, 1, "default 1")
     c.set_defaults(func=_cmd_data_check)
+
+    s = sub.add_parser("capture", help="photos or a video -> a COLMAP dataset "
+                                       "(pycolmap structure from motion)")
+    s.add_argument("src", help="a folder of photos or a video file")
+    s.add_argument("--out", required=True, help="dataset folder to write")
+    s.add_argument("--frames", type=cliopts.whole_number(), default=200, metavar="N",
+                   help="a video's frames to keep, the sharpest of each window (default 200)")
+    s.add_argument("--matcher", default="auto", choices=["auto", "exhaustive", "sequential"],
+                   help="auto: exhaustive for up to 300 photos, else sequential (video too)")
+    s.add_argument("--bounded", action=argparse.BooleanOptionalAction, default=None,
+                   help="an object capture, scaled into [-1, 1]^3 (default: when every "
+                        "photo has a transparent background)")
+    s.add_argument("--downscale", type=cliopts.whole_number(), default=None, metavar="N",
+                   help="also write images_N/ (then train with --downscale N)")
+    s.add_argument("--threads", type=cliopts.whole_number(), default=None,
+                   help="CPU threads (default: all)")
+    s.add_argument("--force", action="store_true", help="redo every stage")
+    s.set_defaults(func=_cmd_capture)
 
     s = sub.add_parser("train", help="train a model (PyTorch)")
     s.add_argument("data", help="dataset folder: Blender transforms_*.json, nerfstudio "

@@ -13,6 +13,10 @@ distortion and is refused, naming the camera, its model and parameters: undistor
 (``colmap image_undistorter`` or ``pycolmap.undistort_images`` write PINHOLE cameras).
 Every file in the image folder must be a registered image (and the other way round).
 
+A ``clrender.json`` beside ``sparse/`` (written by ``clrender capture --bounded``), with
+``{"scene": "bounded", "centre": [x, y, z], "scale": s}`` in the model's world units, makes
+the scene bounded: camera positions ``(c - centre) * s`` instead of the LLFF normalisation.
+
 ``downscale`` N reads ``images_N/`` (Mip-NeRF 360 ships them) where present, else shrinks
 ``images/``; intrinsics are scaled to the images read.
 
@@ -21,6 +25,7 @@ al. 2022) test split.
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +37,7 @@ from .views import SplitViews, check_pose, check_split, image_size
 
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
 MODEL_FILES = ("cameras", "images", "points3D")
+MARKER = "clrender.json"
 OPENCV_TO_NERF = np.diag([1.0, -1.0, -1.0, 1.0])  # flip the y and z camera axes
 
 
@@ -99,7 +105,7 @@ def scan_colmap(path, split: str = "train", downscale: int = 1) -> SplitViews:
     for name, _, w2c in images:
         check_pose(w2c, f"{model}: image {name!r}")
         c2w.append(np.linalg.inv(w2c) @ OPENCV_TO_NERF)
-    c2w = normalise(np.stack(c2w))
+    scene, c2w = scene_frame(root, np.stack(c2w))
     files, views, shrunk = [], [], factor // resize   # images_N/ read: shrunk N times
     for i in split_indices(len(images), split):
         name, camera_id = images[i][:2]
@@ -114,8 +120,30 @@ def scan_colmap(path, split: str = "train", downscale: int = 1) -> SplitViews:
         full = Camera(fx, fy, cx, cy, cam.width, cam.height, c2w[i])
         views.append(full.scaled_to(w, h))
         files.append(file)
-    return check_split(SplitViews("colmap", root, split, "unbounded", files, views, resize,
+    return check_split(SplitViews("colmap", root, split, scene, files, views, resize,
                                   folder))
+
+
+def scene_frame(root: Path, c2w: np.ndarray) -> tuple[str, np.ndarray]:
+    """(scene kind, (N, 4, 4) normalised c2w): ``root/clrender.json``'s box if present
+    (bounded), else :func:`normalise` (unbounded)."""
+    file = root / MARKER
+    if not file.is_file():
+        return "unbounded", normalise(c2w)
+    try:
+        box = json.loads(file.read_text())
+        centre = np.asarray(box["centre"], dtype=np.float64)
+        scale = float(box["scale"])
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError) as exc:
+        raise ValueError(f"{file}: expected {{\"scene\": \"bounded\", \"centre\": [x, y, z], "
+                         f"\"scale\": s}} ({exc!r})") from exc
+    if box.get("scene") != "bounded" or centre.shape != (3,) or not np.all(np.isfinite(centre)) \
+            or not np.isfinite(scale) or scale <= 0:
+        raise ValueError(f"{file}: expected scene \"bounded\", a finite centre [x, y, z] and a "
+                         f"positive scale, found {box}")
+    out = c2w.copy()
+    out[:, :3, 3] = (out[:, :3, 3] - centre) * scale
+    return "bounded", out
 
 
 def check_registered(folder: Path, names: list[str], model: Path) -> None:

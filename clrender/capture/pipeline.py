@@ -1,0 +1,207 @@
+"""``clrender capture``: photos or a video in, a COLMAP dataset folder out.
+
+Stages, each recorded in a work folder ``<out>.work/`` by a ``<stage>.json`` written last
+(its outputs are renamed into place first), so an interrupted capture resumes at the first
+stage without one; ``force`` starts over:
+
+    frames        photos checked / video frames picked       -> frames/
+    features      SIFT, one shared camera                    -> features.db
+    matching      exhaustive (photos) or sequential (video)  -> matches.db
+    mapping       incremental mapping, largest model kept    -> sparse/<k>/
+    undistortion  PINHOLE images of the registered frames    -> undistorted/
+    output        <out>/: images/, images_N/, sparse/0/, capture.json, clrender.json
+
+``<out>`` appears whole or not at all (built in a temporary folder, then renamed).
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sqlite3
+import sys
+import time
+from contextlib import closing
+from pathlib import Path
+
+from ..atomic import atomic_folder, write_atomic
+from . import sfm
+from .frames import MIN_FRAMES, copy_photos
+from .output import write_output
+from .video import VIDEO_SUFFIXES, extract_frames
+
+STAGES = ("frames", "features", "matching", "mapping", "undistortion", "output")
+EXHAUSTIVE_MAX = 300     # photos beyond this are matched sequentially (pairs grow as N^2)
+REPORT = "capture.json"
+
+
+def capture(src, out, max_frames: int = 200, matcher: str = "auto", bounded=None,
+            downscale: int | None = None, force: bool = False, threads: int | None = None,
+            seed: int = 0) -> dict:
+    """Run structure from motion on ``src`` and write a COLMAP dataset to ``out``.
+
+    Args:
+        src: a folder of photos (``.png``, ``.jpg``) or a video file.
+        out: the dataset folder to write (must not exist unless ``force``).
+        max_frames: a video's frame budget (the sharpest of each window).
+        matcher: "auto" (sequential for video or over EXHAUSTIVE_MAX photos), "exhaustive"
+            or "sequential".
+        bounded: True: an object capture scaled into [-1, 1]^3 (``clrender.json``); False:
+            unbounded; None: bounded when every photo has transparent pixels.
+        downscale: also write ``images_{downscale}/``.
+        threads: CPU threads for every stage (default: all of the machine's).
+    Returns:
+        the report written to ``out/capture.json``.
+    """
+    src, out = Path(src), Path(out)
+    work = out.with_name(out.name + ".work")
+    if not src.exists():
+        raise FileNotFoundError(f"{src}: no such folder or video")
+    if force:
+        shutil.rmtree(work, ignore_errors=True)
+    elif (out / REPORT).is_file():
+        return json.loads((out / REPORT).read_text())
+    elif out.exists() and any(out.iterdir()):
+        raise ValueError(f"{out}: exists and is not a finished capture (use --force to "
+                         "replace it)")
+    is_video = src.is_file()
+    if is_video and src.suffix.lower() not in VIDEO_SUFFIXES:
+        raise ValueError(f"{src}: not a folder of images nor a video "
+                         f"({', '.join(VIDEO_SUFFIXES)})")
+    settings = {"src": str(src.resolve()), "max_frames": max_frames if is_video else None,
+                "matcher": matcher, "seed": seed}
+    work.mkdir(parents=True, exist_ok=True)
+    check_settings(work, settings)
+    threads = threads or os.cpu_count() or 1
+    run = _Run(work, threads)
+    info = run.stage("frames", lambda: _frames(src, work, is_video, max_frames))
+    sequential = matcher == "sequential" or (matcher == "auto" and (
+        is_video or info["given"] > EXHAUSTIVE_MAX))
+    run.stage("features", lambda: _database(work / "features.db", None,
+                                            lambda db: sfm.extract(db, work / "frames",
+                                                                   threads)))
+    run.stage("matching", lambda: _database(
+        work / "matches.db", work / "features.db",
+        lambda db: {"pairs": sfm.match(db, sequential, threads),
+                    "matcher": "sequential" if sequential else "exhaustive"}))
+    mapped = run.stage("mapping", lambda: _mapping(work, threads, seed, info["given"]))
+    run.stage("undistortion", lambda: _undistortion(work, mapped["chosen"], threads))
+    is_bounded = info["transparent"] if bounded is None else bool(bounded)
+    report = {"given": info["given"], "source": info["source"], "threads": threads,
+              **{k: mapped[k] for k in ("registered", "reprojection_error_px", "points3D",
+                                        "models", "left_out")},
+              "camera": mapped.get("camera"),
+              "scene": "bounded" if is_bounded else "unbounded",
+              "matcher": run.info("matching")["matcher"], "downscale": downscale}
+    run.stage("output", lambda: write_output(work, out, report, run.times, force))
+    return json.loads((out / REPORT).read_text())
+
+
+class _Run:
+    """The stages of one capture: skip those done, time the others."""
+
+    def __init__(self, work: Path, threads: int):
+        self.work, self.threads = work, threads
+        self.times = {}
+
+    def info(self, name: str) -> dict:
+        return json.loads((self.work / f"{name}.json").read_text())
+
+    def stage(self, name: str, fn) -> dict:
+        """``fn()``'s info dict, or the stored one of a stage done before."""
+        if (self.work / f"{name}.json").is_file():
+            info = self.info(name)
+            self.times[name] = {"seconds": info.get("_seconds"), "skipped": True}
+            return info
+        start = time.perf_counter()
+        info = fn() or {}
+        info["_seconds"] = round(time.perf_counter() - start, 2)
+        self.times[name] = {"seconds": info["_seconds"], "skipped": False}
+        if name != "output":
+            write_atomic(self.work / f"{name}.json", json.dumps(info, indent=2))
+        return info
+
+
+def check_settings(work: Path, settings: dict) -> None:
+    """Record ``settings`` in a new work folder; one made with others is refused."""
+    file = work / "settings.json"
+    if file.is_file():
+        old = json.loads(file.read_text())
+        if old != settings:
+            changed = ", ".join(f"{k} {old.get(k)!r} -> {v!r}" for k, v in settings.items()
+                                if old.get(k) != v)
+            raise ValueError(f"{work}: a capture with other settings is under way here "
+                             f"({changed}); use --force to start over")
+    else:
+        write_atomic(file, json.dumps(settings, indent=2))
+
+
+def _frames(src: Path, work: Path, is_video: bool, max_frames: int) -> dict:
+    result = {}
+
+    def write(tmp: Path) -> None:
+        result.update(extract_frames(src, tmp, max_frames) if is_video
+                      else copy_photos(src, tmp))
+
+    atomic_folder(work / "frames", write)
+    return result
+
+
+def _database(db: Path, start: Path | None, fill) -> dict:
+    """``fill(tmp)`` on a copy of ``start`` (or a new database), then renamed to ``db``."""
+    tmp = db.with_name(f".{db.name}.tmp")
+    leftovers = [tmp.with_name(tmp.name + s) for s in ("", "-wal", "-shm")]  # SQLite's
+    for f in leftovers:
+        f.unlink(missing_ok=True)
+    if start is not None:
+        shutil.copyfile(start, tmp)
+    try:
+        info = fill(tmp)
+        with closing(sqlite3.connect(tmp)) as con:     # the WAL into the file, then move it
+            con.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        os.replace(tmp, db)
+    finally:
+        for f in leftovers:
+            f.unlink(missing_ok=True)
+    return info or {}
+
+
+def _mapping(work: Path, threads: int, seed: int, given: int) -> dict:
+    """Map ``matches.db`` into ``sparse/``; the largest model is chosen."""
+    found = {}
+
+    def write(tmp: Path) -> None:
+        found.update(sfm.reconstruct(work / "matches.db", work / "frames", tmp, threads, seed))
+
+    if (work / "sparse").exists():
+        shutil.rmtree(work / "sparse")
+    atomic_folder(work / "sparse", write)
+    models = {k: sfm.model_summary(r) for k, r in found.items()}
+    best = max((m["registered"] for m in models.values()), default=0)
+    if best < MIN_FRAMES:
+        shutil.rmtree(work / "sparse")
+        raise ValueError(f"{work / 'frames'}: structure from motion registered "
+                         f"{'none' if best == 0 else f'only {best}'} of the {given} images "
+                         f"(at least {MIN_FRAMES} needed; too few matching features: little "
+                         "texture, little overlap between views, or unrelated photos)")
+    chosen = max(models, key=lambda k: models[k]["registered"])
+    left_out = given - models[chosen]["registered"]
+    if len(models) > 1:
+        print(f"clrender capture: warning: {len(models)} disconnected models; kept the "
+              f"largest ({models[chosen]['registered']} of {given} images), {left_out} images "
+              "left out", file=sys.stderr)
+    return {**models[chosen], "chosen": str(chosen), "models": len(models),
+            "left_out": left_out}
+
+
+def _undistortion(work: Path, chosen: str, threads: int) -> dict:
+    def write(tmp: Path) -> None:
+        sfm.undistort(work / "sparse" / chosen, work / "frames", tmp, threads)
+        model = tmp / "sparse" / "0"
+        model.mkdir()
+        for f in (tmp / "sparse").iterdir():
+            if f.is_file():
+                f.rename(model / f.name)
+
+    atomic_folder(work / "undistorted", write)
+    return {}

@@ -1,0 +1,120 @@
+"""Structure from motion with pycolmap (COLMAP's pipeline, on the CPU): SIFT features,
+matching, incremental mapping with one shared camera, undistortion to PINHOLE.
+
+Each stage is one function over COLMAP files (a database, a model folder); the pipeline
+(:mod:`.pipeline`) decides which stages run and where their outputs go.
+
+References: Schönberger & Frahm 2016, "Structure-from-Motion Revisited" (COLMAP).
+"""
+from __future__ import annotations
+
+import itertools
+import zlib  # noqa: F401  loaded before pycolmap: its own zlib symbols break PNG writing
+from pathlib import Path
+
+import pycolmap
+from tqdm import tqdm
+
+CAMERA_MODEL = "SIMPLE_RADIAL"   # one focal length + one radial term, refined by mapping
+EXTRACT_CHUNK = 8                # images per extraction call (the progress bar's step)
+MATCH_BLOCK = 500                # image pairs per matching call (the progress bar's step)
+LOG_LEVEL = 1                    # COLMAP's warnings and errors; the stages report progress
+MIN_MODEL_SIZE = 3               # COLMAP drops smaller models; its 10 drops small captures
+
+pycolmap.logging.minloglevel = max(pycolmap.logging.minloglevel, LOG_LEVEL)
+
+
+def extract(db: Path, images: Path, threads: int) -> None:
+    """SIFT features of every image of ``images`` into database ``db``, one shared camera
+    (the first chunk creates it, the others reuse it: each call would make its own)."""
+    names = sorted(p.name for p in images.iterdir())
+    options = pycolmap.FeatureExtractionOptions(num_threads=threads)
+    camera_id = -1
+    with tqdm(total=len(names), desc="features", unit="image", disable=None) as bar:
+        for i in range(0, len(names), EXTRACT_CHUNK):
+            chunk = names[i:i + EXTRACT_CHUNK]
+            reader = pycolmap.ImageReaderOptions(camera_model=CAMERA_MODEL,
+                                                 existing_camera_id=camera_id)
+            pycolmap.extract_features(db, images, image_names=chunk,
+                                      camera_mode=pycolmap.CameraMode.SINGLE,
+                                      reader_options=reader, extraction_options=options,
+                                      device=pycolmap.Device.cpu)
+            camera_id = _images(db)[0].camera_id
+            bar.update(len(chunk))
+
+
+def match(db: Path, sequential: bool, threads: int, overlap: int = 10) -> int:
+    """Match and geometrically verify image pairs of ``db``: every pair (exhaustive), or
+    each image with those :func:`sequential_steps` after it by name (sequential, video).
+    Returns the number of pairs matched."""
+    options = pycolmap.FeatureMatchingOptions(num_threads=threads)
+    names = sorted(im.name for im in _images(db))
+    if sequential:
+        pairs = [(names[i], names[i + d]) for i in range(len(names))
+                 for d in sequential_steps(overlap) if i + d < len(names)]
+    else:
+        pairs = list(itertools.combinations(names, 2))
+    pairs_file = db.with_suffix(".pairs.txt")
+    try:
+        with tqdm(total=len(pairs), desc="matching", unit="pair", disable=None) as bar:
+            for i in range(0, len(pairs), MATCH_BLOCK):
+                block = pairs[i:i + MATCH_BLOCK]
+                pairs_file.write_text("".join(f"{a} {b}\n" for a, b in block))
+                pycolmap.match_image_pairs(
+                    db, matching_options=options, device=pycolmap.Device.cpu,
+                    pairing_options=pycolmap.ImportedPairingOptions(
+                        match_list_path=pairs_file))
+                bar.update(len(block))
+    finally:
+        pairs_file.unlink(missing_ok=True)
+    return len(pairs)
+
+
+def sequential_steps(overlap: int) -> list[int]:
+    """Frame steps matched in sequential mode: 1..overlap, then 2^k beyond it up to
+    2^overlap (COLMAP's quadratic overlap: far pairs tie the sequence against drift)."""
+    return sorted(set(range(1, overlap + 1)) | {2 ** k for k in range(overlap + 1)})
+
+
+def _images(db: Path):
+    database = pycolmap.Database.open(db)
+    try:
+        return database.read_all_images()
+    finally:
+        database.close()
+
+
+def reconstruct(db: Path, images: Path, out: Path, threads: int, seed: int = 0) -> dict:
+    """Incremental mapping of ``db`` into ``out/<k>/`` (one folder per model found).
+    Returns {k: Reconstruction}."""
+    pycolmap.set_random_seed(seed)
+    options = pycolmap.IncrementalPipelineOptions(num_threads=threads, random_seed=seed,
+                                                  min_model_size=MIN_MODEL_SIZE)
+    n = len(_images(db))
+    with tqdm(total=n, desc="mapping", unit="image", disable=None) as bar:
+        return pycolmap.incremental_mapping(db, images, out, options,
+                                            next_image_callback=lambda: bar.update())
+
+
+def model_summary(rec) -> dict:
+    """{"registered", "points3D", "reprojection_error_px", "camera": {"model", "params"}}
+    of a Reconstruction (its first camera: the shared one)."""
+    camera = next(iter(rec.cameras.values()), None)
+    return {"registered": rec.num_reg_images(), "points3D": rec.num_points3D(),
+            "reprojection_error_px": float(rec.compute_mean_reprojection_error()),
+            "camera": None if camera is None else {
+                "model": camera.model.name, "width": camera.width, "height": camera.height,
+                "params": [float(p) for p in camera.params]}}
+
+
+def undistort(model: Path, images: Path, out: Path, threads: int) -> None:
+    """Undistort the registered images of ``model`` to PINHOLE into ``out``:
+    ``out/images/`` and the model in ``out/sparse/``."""
+    with tqdm(total=1, desc="undistortion", unit="model", disable=None) as bar:
+        pycolmap.undistort_images(out, model, images, num_threads=threads)
+        bar.update()
+
+
+def read_model(folder: Path):
+    """The Reconstruction in ``folder``."""
+    return pycolmap.Reconstruction(str(folder))
