@@ -108,3 +108,26 @@ def test_reads_are_only_counted_when_asked():
     model, camera = _model("bounded"), _camera("bounded", 8)
     out = Renderer(model, march="paper", exact=True).render(camera, stats=True)
     assert not any(k.startswith("reads_") or k == "n_reads" for k in out)
+
+
+@pytest.mark.parametrize("scene", ["bounded", "unbounded"])
+def test_centre_metric_kernel_matches_reference(scene, cl_platform):
+    """G of the paper's centre metric (longer steps, which may pass an occupied point): the
+    kernel takes the reference's points and reads on PoCL and Intel's runtime."""
+    from dataclasses import replace
+
+    from clrender.ngprt.baked import build_distance_grid, validate
+
+    box, camera = _model(scene, seed=2), _camera(scene)
+    G = build_distance_grid(box.arrays["occupancy_0"], box.config.G_res, "centre")
+    model = replace(box, G_metric="centre", arrays={**box.arrays, "G": G})
+    validate(model)
+    assert np.any(G > box.arrays["G"])
+    out = Renderer(model, march="paper", exact=True, count_reads=True).render(
+        camera, background=BACKGROUND, stats=True)
+    ref = render_reference(model, camera, background=BACKGROUND, march="paper")
+    for key in ("n_march", "n_occ"):
+        np.testing.assert_array_equal(out[key], ref[key], err_msg=key)
+    np.testing.assert_array_equal(_reads(out), ref["reads"])
+    np.testing.assert_allclose(out["rgb"], ref["rgb"], rtol=0, atol=1e-4)
+    assert ref["reads"][..., 1].sum() > 0                                 # G's step taken
