@@ -7,6 +7,8 @@ precision highp sampler2D;
 precision highp isampler2D;
 precision highp sampler2DArray;
 precision highp sampler3D;
+precision highp usampler3D;
+precision highp isampler3D;
 uniform vec4 intr;            // fx, fy, cx, cy (pixels)
 uniform vec3 R0, R1, R2;      // rows of the camera-to-world rotation
 uniform vec3 origin;          // camera centre (world)
