@@ -138,7 +138,7 @@ async function main() {
       $("stats").textContent = `${cam.width}x${cam.height}: ${ms.toFixed(1)} ms a frame ` +
         `(${(1000 / ms).toFixed(1)} fps), load ${(hook.loadMs / 1000).toFixed(2)} s, ` +
         `${(model.bytes / 1e6).toFixed(1)} MB`;
-      const size = Math.min(window.innerWidth, window.innerHeight * view.base.width / view.base.height);
+      const size = Math.min(window.innerWidth - 260, window.innerHeight * view.base.width / view.base.height);
       canvas.style.width = `${Math.min(size, view.base.width * 2)}px`;
     }
     requestAnimationFrame(frame);
