@@ -145,12 +145,11 @@ def browser():
 
 def page_frames(browser, folder, cameras) -> list[np.ndarray]:
     """The page of ``folder`` drawing each camera: float frames (H, W, 3)."""
-    from clrender.export.page import render_view, wait_ready
+    from clrender.export.page import open_page, render_view
 
     url, server = serve(folder)
     try:
-        browser.get(url)
-        wait_ready(browser)
+        open_page(browser, url)
         return [render_view(browser, cam)[0] for cam in cameras]
     finally:
         server.shutdown()
@@ -198,14 +197,13 @@ def test_page_lists_cameras_and_shows_ms(browser, tmp_path):
     from bench.browser import wait_for
     from clrender.data import make_scene
     from clrender.data.load import scan_dataset
-    from clrender.export.page import wait_ready
+    from clrender.export.page import open_page
 
     scene = make_scene("bounded", tmp_path / "scene", seed=0, n_train=1, n_test=2, width=32,
                        height=32)
     url, server = serve(export(ndrf_file(tmp_path), tmp_path / "site", data=scene))
     try:
-        browser.get(url)
-        wait_ready(browser)
+        open_page(browser, url)
         options = browser.execute_script(
             "return Array.from(document.getElementById('cameras').options).map(o => o.text);")
         assert options == [Path(f).stem for f in scan_dataset(scene, "test").files]

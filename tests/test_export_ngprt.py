@@ -40,12 +40,11 @@ def browser():
 
 
 def page_frames(browser, folder, cameras) -> list[np.ndarray]:
-    from clrender.export.page import render_view, wait_ready
+    from clrender.export.page import open_page, render_view
 
     url, server = serve(folder)
     try:
-        browser.get(url)
-        wait_ready(browser)
+        open_page(browser, url)
         return [render_view(browser, cam)[0] for cam in cameras]
     finally:
         server.shutdown()

@@ -24,7 +24,7 @@ import numpy as np
 
 import clrender
 from clrender.export import export, serve
-from clrender.export.page import render_view, wait_ready
+from clrender.export.page import open_page, render_view
 from clrender.metrics import psnr, summarize_ms
 
 from bench.browser import chromium, missing, webgl_renderer
@@ -48,8 +48,7 @@ def measure(model_path, data, sizes, frames: int, views: int, downscale=None) ->
         url, server = serve(site)
         driver = chromium(900, 900)
         try:
-            driver.get(url)
-            row["load_ms"] = wait_ready(driver, timeout_s=600)["load_ms"]
+            row["load_ms"] = open_page(driver, url, timeout_s=600)["load_ms"]
             row["webgl"] = webgl_renderer(driver)
             base = cams[0] if cams else None
             renderer = clrender.Renderer(clrender.load(model_path))

@@ -3,7 +3,7 @@ loaded, render an exact camera through its ``window.clrender`` hook and read bac
 float frame. The tests and bench/speed/browser_fps.py use these.
 
 Examples:
-    >>> driver.get(url); wait_ready(driver)
+    >>> open_page(driver, url)                    # navigate, wait for the hook
     >>> rgb, ms = render_view(driver, camera)     # (H, W, 3) float32, page milliseconds
 """
 from __future__ import annotations
@@ -20,13 +20,22 @@ class PageError(RuntimeError):
     """The page reported an error (its message) or did not load in time."""
 
 
-def wait_ready(driver, timeout_s: float = 120.0) -> dict:
+def open_page(driver, url: str, timeout_s: float = 300.0) -> dict:
+    """Navigate to ``url`` without waiting for its load event (the page draws its first
+    frame while loading, which may take longer than the driver's own timeout on a slow
+    software GL), then :func:`wait_ready`."""
+    driver.execute_script("window.__leaving = true; window.location.href = arguments[0];", url)
+    return wait_ready(driver, timeout_s)
+
+
+def wait_ready(driver, timeout_s: float = 300.0) -> dict:
     """Wait for the page's hook; returns ``{"load_ms", "renderer"}`` (the WebGL renderer
     string). Raises :class:`PageError` with the page's message."""
     end = time.monotonic() + timeout_s
     while True:
-        state = driver.execute_script(
-            "const h = window.clrender; return h ? [h.ready, h.error, h.loadMs] : [false, null, 0];")
+        state = driver.execute_script(            # the page left behind is not ready
+            "const h = window.clrender; return h && !window.__leaving ? "
+            "[h.ready, h.error, h.loadMs] : [false, null, 0];")
         if state[1]:
             raise PageError(f"the page failed: {state[1]}")
         if state[0]:

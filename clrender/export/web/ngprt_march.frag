@@ -97,6 +97,21 @@ void lattice_table(vec3 o, vec3 d, float t0, float t1) {
   }
 }
 
+// Eq. 9's step in contracted arc length (marches.paper_g_step_unbounded): floor(4 g /
+// G_res / s) lattice steps inside G's empty ball, at least 1, at most to the first point
+// of the next piece; 1 from the first point of a piece (it may lie on a jump).
+int g_step_unbounded(int k, uint g, float s) {
+  float sigma = float(k) * s;
+  int n = int(floor(4.0 * float(g) / float(G_RES) / s));
+  int j = 0;
+  for (int q = 1; q < 13; ++q) j += cum[q] <= sigma ? 1 : 0;
+  float end = cum[j + 1];
+  int kp = int(ceil(end / s));
+  if (float(kp - 1) * s >= end) kp -= 1;
+  if (j > 0 && float(k - 1) * s < cum[j]) return k + 1;
+  return max(k + 1, min(k + n, kp));
+}
+
 float lattice_t(float sigma) {          // S^-1
   int j = 0;
   for (int q = 1; q < 13; ++q) j += cum[q] <= sigma ? 1 : 0;
@@ -332,7 +347,11 @@ void main() {
         k += 1;
       } else {
 #if UNBOUNDED
-        k += 1;               // the walk: the same samples as the kernels' closed-form jumps
+        // G's step where G is read and > 0 (the paper's march), else the walk to the next
+        // point: the same samples as the kernels' closed-form jumps, more points visited
+        uint g = 0u;
+        if ((L_C >> lev) < G_RES) g = texelFetch(gridG, cell(u, G_RES).zyx, 0).r;
+        k = g > 0u ? g_step_unbounded(k, g, s) : k + 1;
 #else
         k = skip_bounded(k, t, o, d, u, lev, s, g_end);
 #endif
