@@ -42,10 +42,11 @@ export class NDRF {
   resize(width, height) {
     const gl = this.gl;
     if (this.size[0] === width && this.size[1] === height) return;
+    if (this.frame) this.release();
     this.size = [width, height];
     this.gbufTex = G.floatArray(gl, width, height, 3 * this.K);
     this.hidTex = G.floatArray(gl, width, height, this.H4);
-    const depth = gl.createRenderbuffer();
+    const depth = this.depth = gl.createRenderbuffer();
     gl.bindRenderbuffer(gl.RENDERBUFFER, depth);
     gl.renderbufferStorage(gl.RENDERBUFFER, gl.DEPTH_COMPONENT32F, width, height);
     this.gbufFb = [...Array(this.K).keys()].map(
@@ -63,6 +64,13 @@ export class NDRF {
     this.frameFb = gl.createFramebuffer();
     gl.bindFramebuffer(gl.FRAMEBUFFER, this.frameFb);
     gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, this.frame, 0);
+  }
+
+  release() {
+    const gl = this.gl;
+    [this.gbufTex, this.hidTex, this.frame].forEach((t) => gl.deleteTexture(t));
+    [...this.gbufFb, ...this.hidFb, this.frameFb].forEach((f) => gl.deleteFramebuffer(f));
+    gl.deleteRenderbuffer(this.depth);
   }
 
   // Draws camera `cam` ({fx, fy, cx, cy, width, height, c2w}) into this.frame.
