@@ -24,6 +24,7 @@ def open_page(driver, url: str, timeout_s: float = 300.0) -> dict:
     """Navigate to ``url`` without waiting for its load event (the page draws its first
     frame while loading, which may take longer than the driver's own timeout on a slow
     software GL), then :func:`wait_ready`."""
+    driver.set_script_timeout(timeout_s)        # a frame may take minutes on a software GL
     driver.execute_script("window.__leaving = true; window.location.href = arguments[0];", url)
     return wait_ready(driver, timeout_s)
 
