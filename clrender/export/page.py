@@ -25,6 +25,7 @@ def open_page(driver, url: str, timeout_s: float = 300.0) -> dict:
     frame while loading, which may take longer than the driver's own timeout on a slow
     software GL), then :func:`wait_ready`."""
     driver.set_script_timeout(timeout_s)        # a frame may take minutes on a software GL
+    driver.command_executor.client_config.timeout = timeout_s + 30   # selenium's HTTP read
     driver.execute_script("window.__leaving = true; window.location.href = arguments[0];", url)
     return wait_ready(driver, timeout_s)
 
