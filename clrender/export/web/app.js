@@ -160,6 +160,8 @@ async function main() {
   };
   canvas.onwheel = (e) => { e.preventDefault(); view.zoom(Math.sign(e.deltaY)); dirty = true; };
 
+  const scale = new URLSearchParams(location.search).get("scale");   // e.g. ?scale=0.25
+  if (scale && [...$("scale").options].some((o) => o.value === scale)) $("scale").value = scale;
   $("title").textContent = `${model.method} (${model.source})`;
   Object.assign(hook, {
     model, cameras: model.cameras, renderer,
@@ -175,7 +177,7 @@ async function main() {
     },
     setBackground: (rgb) => { renderer.background = rgb; },
   });
-  draw(view.camera(1));
+  draw(view.camera(parseFloat($("scale").value)));
   hook.loadMs = performance.now();    // since navigation started
   hook.ready = true;
   requestAnimationFrame(frame);
