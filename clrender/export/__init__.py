@@ -16,7 +16,7 @@ from .writer import camera_record, dataset_cameras, write_export
 __all__ = ["export", "serve", "ExportError"]
 
 
-def _default_camera(model) -> dict:
+def _default_camera() -> dict:
     """A view of the bounded scene box when no dataset gives cameras (the README's)."""
     from ..camera import Camera, look_at
 
@@ -54,7 +54,7 @@ def export(model_path, out, data=None, downscale: int | None = None) -> Path:
         if not cameras:
             raise ExportError(f"{data}: the dataset has no test cameras")
     else:
-        cameras = [_default_camera(model)]
+        cameras = [_default_camera()]
     manifest = {"method": model.method, "config": model.config.to_dict(),
                 "source": Path(model_path).name, "cameras": cameras, **fields}
     return write_export(out, manifest, assets)
