@@ -141,6 +141,16 @@ def _cmd_view(args) -> int:
     return 0
 
 
+def _cmd_export(args) -> int:
+    from .export import export, serve
+
+    out = export(args.model, args.out, data=args.data, downscale=args.downscale)
+    print(f"wrote {out} (serve it: python -m http.server -d {out}, or --serve)")
+    if args.serve:
+        serve(out, host=args.host, port=args.port, block=True)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="clrender", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -240,6 +250,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--max-size", type=int, default=800, help="long side of a resting frame, px")
     s.add_argument("--device", default=None)
     s.set_defaults(func=_cmd_view)
+
+    s = sub.add_parser("export", help="a static WebGL2 page of a baked model (docs/browser.md)")
+    s.add_argument("model")
+    s.add_argument("--out", required=True, help="a new folder for the page")
+    s.add_argument("--data", default=None, help="dataset whose test cameras the page lists")
+    _add_downscale(s, None, "of --data; default: the model's training downscale")
+    s.add_argument("--serve", action="store_true", help="then serve it over HTTP")
+    s.add_argument("--host", default="127.0.0.1", help="address to serve on (default local only)")
+    s.add_argument("--port", type=int, default=8000, help="port to serve on (0: a free one)")
+    s.set_defaults(func=_cmd_export)
 
     for name in methods.names():
         methods.get(name).add_commands(sub)
