@@ -131,7 +131,7 @@ def test_cli_export_and_its_error(tmp_path):
 
 @pytest.fixture(scope="module")
 def browser():
-    from bench.browser import chromium, missing
+    from bench.tools.browser import chromium, missing
 
     reason = missing()
     if reason is not None:
@@ -194,7 +194,7 @@ def test_ndrf_page_matches_opencl_on_a_trained_student(browser, tmp_path, tiny_n
 
 
 def test_page_lists_cameras_and_shows_ms(browser, tmp_path):
-    from bench.browser import wait_for
+    from bench.tools.browser import wait_for
     from clrender.data import make_scene
     from clrender.data.load import scan_dataset
     from clrender.export.page import open_page

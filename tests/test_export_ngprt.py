@@ -27,7 +27,7 @@ MIN_PSNR = 40.0          # dB, page vs OpenCL (issue 47)
 
 @pytest.fixture(scope="module")
 def browser():
-    from bench.browser import chromium, missing
+    from bench.tools.browser import chromium, missing
 
     reason = missing()
     if reason is not None:

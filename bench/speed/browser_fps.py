@@ -27,7 +27,7 @@ from clrender.export import export, serve
 from clrender.export.page import open_page, render_view
 from clrender.metrics import psnr, summarize_ms
 
-from bench.browser import chromium, missing, webgl_renderer
+from bench.tools.browser import chromium, missing, webgl_renderer
 
 
 def measure(model_path, data, sizes, frames: int, views: int, downscale=None) -> dict:
