@@ -33,21 +33,29 @@ def test_table4_end_to_end(small_scene, tmp_path, capsys):
     assert run.main(args) == 0
     data = json.loads((tmp_path / "out" / "table4.json").read_text())
     rows = data["rows"]
-    assert [(r["L"], r["march"], r["use_G"]) for r in rows] == [
-        (L, m, g) for L in (2, 3, 4) for m, g in (("paper", 0), ("paper", 1), ("ours", 1))]
+    assert [(r["L"], r["march"], r["use_G"], r.get("G_metric")) for r in rows] == [
+        (L, m, g, metric) for L in (2, 3, 4) for m, g, metric in (
+            ("paper", 0, None), ("paper", 1, None), ("paper", 1, "centre"), ("ours", 1, None))]
     assert data["preset"] == "tiny" and data["resolution"] == "40x40"
-    for base, paper_g, ours in zip(rows[::3], rows[1::3], rows[2::3]):
-        assert base["model_key"] == paper_g["model_key"] == ours["model_key"]
+    for base, paper_g, centre, ours in zip(rows[::4], rows[1::4], rows[2::4], rows[3::4]):
+        assert base["model_key"] == paper_g["model_key"] == centre["model_key"] \
+            == ours["model_key"]
         assert base["paired_speedup"] is None and base["same_image"] is None
         for on in (paper_g, ours):
             assert on["Occupied"] == base["Occupied"] and on["PSNR"] == base["PSNR"]
             assert on["same_image"] == {"identical": True, "max_diff": 0.0, "views": 2}
+        for on in (paper_g, centre, ours):
             assert on["speedup"] == pytest.approx(base["time_ms"]["median"]
                                                   / on["time_ms"]["median"])
             for size, pair in [("40x40", on["paired_speedup"]),
                                ("1920x1080", on["paired_at"]["1920x1080"])]:
                 assert pair["size"] == size and pair["stage"] == "march" and pair["n"] == 2
                 assert 0 < pair["lo"] <= pair["ratio"] <= pair["hi"]
+        # The centre metric's row: the same run baked again beside the model, its images
+        # compared (not required to match: its steps may pass an occupied point).
+        folder = tmp_path / "cache" / "models" / centre["model_key"]
+        assert (folder / "model-G_metric=centre.npz").is_file()
+        assert centre["same_image"]["views"] == 2
         # Ours visits no more points than the paper's w/o G and reads one code a point.
         assert ours["Marching"] <= base["Marching"] and ours["Reads"] < base["Reads"]
         assert ours["Skip reads"] == pytest.approx(ours["Marching"])
@@ -58,11 +66,14 @@ def test_table4_end_to_end(small_scene, tmp_path, capsys):
                                              abs=1e-9)
     assert len({r["model_key"] for r in rows}) == 3
     md = (tmp_path / "out" / "table4.md").read_text()
-    assert "| L=4 ours |" in md and md.count("| identical |") == 6
+    same_centre = sum(r["same_image"]["identical"] for r in rows[2::4])
+    assert "| L=4 ours |" in md and md.count("| identical |") == 6 + same_centre
     models = sorted((tmp_path / "cache" / "models").iterdir())
-    stamps = [(m / "model.npz").stat().st_mtime_ns for m in models]
+    stamps = [(m / name).stat().st_mtime_ns for m in models
+              for name in ("model.npz", "model-G_metric=centre.npz")]
     assert run.main(args) == 0                  # cached: nothing retrained or rebaked
-    assert [(m / "model.npz").stat().st_mtime_ns for m in models] == stamps
+    assert [(m / name).stat().st_mtime_ns for m in models
+            for name in ("model.npz", "model-G_metric=centre.npz")] == stamps
 
 
 def test_unknown_scene_is_a_clear_error(tmp_path, capsys):

@@ -218,6 +218,8 @@ def test_photos_with_nothing_in_common_register_nothing(tmp_path):
 def test_disconnected_models_keep_the_largest_and_say_so(tmp_path, monkeypatch, capsys,
                                                          photos):
     class Model:
+        cameras = {}                       # the report's camera: none in this stand-in
+
         def __init__(self, n):
             self.n = n
 

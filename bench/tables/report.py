@@ -261,7 +261,7 @@ def _spreads(table, m, stats: list[str]) -> dict | None:
 
 def _record(table, row, m, stats: list[str], speedup, sample: str) -> dict:
     """The JSON record of one row."""
-    return {"row": row.name, "method": row.method, **row.model, **row.render,
+    return {"row": row.name, "method": row.method, **row.model, **row.render, **row.bake,
             "PSNR": m.psnr, "SSIM": m.ssim, "time_ms": m.time, "wall_ms": m.wall_ms,
             "stages_ms": m.stages, "FPS": 1000.0 / m.time["median"],
             "time_ms_at_width": {str(w): t for w, t in m.time_at.items()},
