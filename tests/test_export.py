@@ -25,8 +25,8 @@ from clrender.metrics import psnr
 from clrender.ndrf.baked import NDRFModel, save_baked, validate
 from clrender.ndrf.config import NDRFConfig
 from clrender.ndrf.random_model import random_ndrf_model
+from export_pages import browser, page_frames  # noqa: F401  (a fixture)
 
-UNDER_CI = os.environ.get("CI") == "true"
 MIN_PSNR = 40.0          # dB, page vs OpenCL (issue 47)
 REPO = Path(__file__).resolve().parents[1]
 
@@ -128,33 +128,6 @@ def test_cli_export_and_its_error(tmp_path):
 
 
 # ---- the page in headless Chromium -----------------------------------------------------
-
-@pytest.fixture(scope="module")
-def browser():
-    from bench.tools.browser import chromium, missing
-
-    reason = missing()
-    if reason is not None:
-        if UNDER_CI:
-            pytest.fail(f"CI=true: {reason}")
-        pytest.skip(reason)
-    driver = chromium(320, 240)
-    yield driver
-    driver.quit()
-
-
-def page_frames(browser, folder, cameras) -> list[np.ndarray]:
-    """The page of ``folder`` drawing each camera: float frames (H, W, 3)."""
-    from clrender.export.page import open_page, render_view
-
-    url, server = serve(folder)
-    try:
-        open_page(browser, url)
-        return [render_view(browser, cam)[0] for cam in cameras]
-    finally:
-        server.shutdown()
-        server.server_close()
-
 
 def probe_cameras() -> list[Camera]:
     """Off-centre principal points, odd sizes, views from several sides."""

@@ -8,47 +8,19 @@ skips the browser tests with the reason; under CI (``CI=true``) they fail.
 """
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import pytest
 
 import clrender
 from clrender.camera import Camera, look_at
-from clrender.export import ExportError, export, serve
+from clrender.export import ExportError, export
 from clrender.metrics import psnr
 from clrender.ngprt.baked import save_baked
 from clrender.ngprt.config import preset
 from clrender.ngprt.random_model import random_baked_model
+from export_pages import browser, page_frames  # noqa: F401  (a fixture)
 
-UNDER_CI = os.environ.get("CI") == "true"
 MIN_PSNR = 40.0          # dB, page vs OpenCL (issue 47)
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from bench.tools.browser import chromium, missing
-
-    reason = missing()
-    if reason is not None:
-        if UNDER_CI:
-            pytest.fail(f"CI=true: {reason}")
-        pytest.skip(reason)
-    driver = chromium(320, 240)
-    yield driver
-    driver.quit()
-
-
-def page_frames(browser, folder, cameras) -> list[np.ndarray]:
-    from clrender.export.page import open_page, render_view
-
-    url, server = serve(folder)
-    try:
-        open_page(browser, url)
-        return [render_view(browser, cam)[0] for cam in cameras]
-    finally:
-        server.shutdown()
-        server.server_close()
 
 
 def cameras(scene: str) -> list[Camera]:

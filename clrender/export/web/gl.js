@@ -72,6 +72,18 @@ export function floatArray(gl, width, height, layers) {
   return t;
 }
 
+// An RGBA32F 2D texture of width x height and a framebuffer drawing into it: {tex, fb}.
+export function floatTarget(gl, width, height) {
+  const tex = gl.createTexture();
+  gl.bindTexture(gl.TEXTURE_2D, tex);
+  nearest(gl, gl.TEXTURE_2D);
+  gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32F, width, height);
+  const fb = gl.createFramebuffer();
+  gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
+  gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, tex, 0);
+  return { tex, fb };
+}
+
 // A framebuffer writing `layers` of array texture `tex` to colour attachments 0.. (and
 // `depth`, a renderbuffer, when given).
 export function layerTarget(gl, tex, layers, depth) {

@@ -57,13 +57,7 @@ export class NDRF {
       for (let j = 0; j < this.NV && p * this.NV + j < this.H4; ++j) layers.push(p * this.NV + j);
       this.hidFb.push(G.layerTarget(gl, this.hidTex, layers));
     }
-    this.frame = gl.createTexture();
-    gl.bindTexture(gl.TEXTURE_2D, this.frame);
-    G.nearest(gl, gl.TEXTURE_2D);
-    gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32F, width, height);
-    this.frameFb = gl.createFramebuffer();
-    gl.bindFramebuffer(gl.FRAMEBUFFER, this.frameFb);
-    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, this.frame, 0);
+    ({ tex: this.frame, fb: this.frameFb } = G.floatTarget(gl, width, height));
   }
 
   release() {

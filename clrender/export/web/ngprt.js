@@ -41,13 +41,7 @@ export class NGPRT {
     if (this.size[0] === width && this.size[1] === height) return;
     if (this.frame) { gl.deleteTexture(this.frame); gl.deleteFramebuffer(this.frameFb); }
     this.size = [width, height];
-    this.frame = gl.createTexture();
-    gl.bindTexture(gl.TEXTURE_2D, this.frame);
-    G.nearest(gl, gl.TEXTURE_2D);
-    gl.texStorage2D(gl.TEXTURE_2D, 1, gl.RGBA32F, width, height);
-    this.frameFb = gl.createFramebuffer();
-    gl.bindFramebuffer(gl.FRAMEBUFFER, this.frameFb);
-    gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, this.frame, 0);
+    ({ tex: this.frame, fb: this.frameFb } = G.floatTarget(gl, width, height));
   }
 
   render(cam) {
