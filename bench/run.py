@@ -113,7 +113,22 @@ def build_parser() -> argparse.ArgumentParser:
                    help="--executor ray: the cluster to join (`auto`, `ray://HOST:PORT`); "
                         "default: a local Ray instance on this machine's cores")
     p.add_argument("--repeats", type=int, default=5, help="timing passes per row")
+    p.add_argument("--bake", action="append", default=[], metavar="NAME=VALUE",
+                   help="a bake option of the table's method on every row (e.g. NGP-RT's "
+                        "grids=preset or grids=paper); results under TABLE-NAME-VALUE")
     return p
+
+
+def bake_options(given: list[str]) -> dict:
+    """``{name: value}`` of ``--bake NAME=VALUE`` arguments (values as text: the bake
+    options that tables vary are choices of words)."""
+    out = {}
+    for item in given:
+        name, sep, value = item.partition("=")
+        if not sep or not name or not value:
+            raise ValueError(f"--bake {item!r}: expected NAME=VALUE")
+        out[name] = value
+    return out
 
 
 def main(argv=None) -> int:
@@ -130,7 +145,8 @@ def main(argv=None) -> int:
         return 0
     try:
         keys = ablation.list_tables() if args.table == "all" else [args.table]
-        tables = [ablation.load_table(k) for k in keys]
+        overrides = bake_options(args.bake)
+        tables = [ablation.with_bake(ablation.load_table(k), overrides) for k in keys]
         if len(args.presets or ()) > 1:
             raise ValueError(f"a table takes one --preset, got {', '.join(args.presets)}")
         args.preset = (args.presets or [None])[0]

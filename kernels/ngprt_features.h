@@ -24,12 +24,16 @@ inline void v_trilinear_weights(vfloat wx, vfloat wy, vfloat wz, vfloat *wt)
 }
 
 /* Corners 0..7 of the coarse cell of each lane in `sample` (render_ref.coarse_features):
- * an absent block (never for an occupied cell) gets weight 0 and index 0. */
+ * an absent block (never for an occupied cell) gets weight 0 and index 0. The coarse cell
+ * is the occupancy cell shifted right by OCC_SHIFT: floor(2^j x) >> j = floor(x) for
+ * x >= 0, and scaling by 2^j is exact, clamping included. */
 inline void v_coarse_corners(const ngp_model *m, const v_march_point *p, vint sample,
                              vint *idx, vfloat *wt)
 {
-    const vcell c0 = p->cell;
-    vcell bi, r;
+    vcell c0, bi, r;
+    c0.x = p->cell.x >> OCC_SHIFT;
+    c0.y = p->cell.y >> OCC_SHIFT;
+    c0.z = p->cell.z >> OCC_SHIFT;
     bi.x = c0.x / COARSE_BLOCK;
     bi.y = c0.y / COARSE_BLOCK;
     bi.z = c0.z / COARSE_BLOCK;

@@ -54,7 +54,7 @@ inline void v_count_reads(v_reads *n, vint code, vint active, vint sample, vint 
 #endif
 #if USE_G && (MARCH_PAPER || !G_IN_CODE)
     const vint lev = CODE_LEVEL(code) - 1;
-    n->G = v_inc(n->G, empty & VMASK(((vint)(L_C) >> lev) < G_RES));
+    n->G = v_inc(n->G, empty & VMASK(((vint)(OCC_RES) >> lev) < G_RES));
 #endif
     n->features = v_add(n->features, (vint)(9 + 8 * L), sample);
 }
@@ -160,7 +160,7 @@ void ngprt_march(__global const float *cam, const int width, const int height,
 #if MARCH_PAPER
         const vint code = v_paper_code(m.occupancy, p.cell, active);
 #else
-        const vint code = v_gather_u16(m.occupancy, v_flat(p.cell, (vint)(L_C)), active);
+        const vint code = v_gather_u16(m.occupancy, v_flat(p.cell, (vint)(OCC_RES)), active);
 #endif
         const vint sample = active & VMASK(CODE_LEVEL(code) == 0);
         const vint empty = active & ~sample;

@@ -5,7 +5,8 @@
  *   shared constants (config.kernel_constants): T_STOP, N_MIP, FEATURES, FUSION_HIDDEN,
  *     LATTICE_BREAKS and the variant codes VARIANT_SUM .. VARIANT_SEPARATE_V
  *     (config.VARIANT_CODES); the hash primes HASH_PRIME_X/Y/Z (encoding.HASH_PRIMES);
- *   per model: L, L_C, LOG2_T, COARSE_BLOCK, G_RES, N_ATT (attention channels in the
+ *   per model: L, L_C, OCC_RES (the finest occupancy level's cells a side, L_C << OCC_SHIFT:
+ *     ModelConfig.occ_res, occ_shift), LOG2_T, COARSE_BLOCK, G_RES, N_ATT (attention channels in the
  *     coarse grid), N_INV (spatially invariant logits), VARIANT, UNBOUNDED, EXTENT
  *     (ModelConfig.extent), USE_G, G_IN_CODE (render_cl.g_in_codes), MARCH_PAPER (the
  *     paper's march, ngprt_paper.h, or ours), COUNT_READS (the counting build);
@@ -28,10 +29,11 @@
 #if !defined(HASH_PRIME_X) || !defined(HASH_PRIME_Y) || !defined(HASH_PRIME_Z)
 #error "ngprt kernels need -D HASH_PRIME_X HASH_PRIME_Y HASH_PRIME_Z (encoding.HASH_PRIMES)"
 #endif
-#if !defined(L) || !defined(L_C) || !defined(LOG2_T) || !defined(COARSE_BLOCK) || \
+#if !defined(L) || !defined(L_C) || !defined(OCC_RES) || !defined(OCC_SHIFT) || \
+    !defined(LOG2_T) || !defined(COARSE_BLOCK) || \
     !defined(G_RES) || !defined(N_ATT) || !defined(N_INV) || !defined(VARIANT) || \
     !defined(UNBOUNDED) || !defined(EXTENT) || !defined(USE_G) || !defined(G_IN_CODE)
-#error "ngprt kernels need -D L L_C LOG2_T COARSE_BLOCK G_RES N_ATT N_INV VARIANT UNBOUNDED EXTENT USE_G G_IN_CODE"
+#error "ngprt kernels need -D L L_C OCC_RES OCC_SHIFT LOG2_T COARSE_BLOCK G_RES N_ATT N_INV VARIANT UNBOUNDED EXTENT USE_G G_IN_CODE"
 #endif
 #if !defined(MARCH_PAPER) || !defined(COUNT_READS) || !defined(CODE_G_SHIFT)
 #error "ngprt kernels need -D MARCH_PAPER COUNT_READS CODE_G_SHIFT (render_cl.kernel_defines)"
@@ -80,7 +82,7 @@ typedef ushort occ_t;
 /* The model's buffers (the kernel arguments of ngprt_march, render_cl.Renderer._upload)
  * and what every sample derives from them alone. */
 typedef struct {
-    __global const occ_t *occupancy;   /* ours: L_C^3 render_cl.exit_codes; the paper's
+    __global const occ_t *occupancy;   /* ours: OCC_RES^3 render_cl.exit_codes; the paper's
                                         * (MARCH_PAPER): render_cl.mip_levels */
     __global const uchar *G;           /* G_RES^3: distance to occupancy, G-voxels */
     __global const int *block_index;   /* (L_C / COARSE_BLOCK)^3: block of a cell, -1 none */

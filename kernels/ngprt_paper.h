@@ -3,7 +3,7 @@
  * is empty, and with G (USE_G) G's step replacing the mip's where G > 0.
  *
  * The occupancy buffer holds the N_MIP levels as bytes, finest first (level lev at
- * MIP_OFFSET(lev), (L_C >> lev)^3 cells, C order; render_cl.mip_levels).
+ * MIP_OFFSET(lev), (OCC_RES >> lev)^3 cells, C order; render_cl.mip_levels).
  */
 #ifndef CLRENDER_NGPRT_PAPER_H
 #define CLRENDER_NGPRT_PAPER_H
@@ -15,7 +15,7 @@
 inline int ngp_mip_offset(int lev)
 {
     int off = 0;
-    for (int l = 0; l < lev; ++l) off += (L_C >> l) * (L_C >> l) * (L_C >> l);
+    for (int l = 0; l < lev; ++l) off += (OCC_RES >> l) * (OCC_RES >> l) * (OCC_RES >> l);
     return off;
 }
 
@@ -32,7 +32,7 @@ inline vint v_paper_code(__global const uchar *mip, vcell cell, vint active)
         c.y = cell.y >> lev;
         c.z = cell.z >> lev;
         const vint occ = v_gather_u8(mip + ngp_mip_offset(lev),
-                                     v_flat(c, (vint)(L_C >> lev)), undecided);
+                                     v_flat(c, (vint)(OCC_RES >> lev)), undecided);
         const vint empty = undecided & VMASK(occ == 0);
         code = select(code, (vint)(1 + lev), empty);
         undecided = undecided & ~empty;
@@ -86,7 +86,7 @@ inline vint v_paper_skip(const ngp_model *m, const v_rays *r, const v_march_poin
 {
 #if USE_G
     const vint lev = code - 1;
-    const vint read = empty & VMASK(((vint)(L_C) >> lev) < G_RES);
+    const vint read = empty & VMASK(((vint)(OCC_RES) >> lev) < G_RES);
     vint g = (vint)(0);
     if (any(read))
         g = v_gather_u8(m->G, v_flat(v_cell(p->u, (vint)(G_RES)), (vint)(G_RES)), read);

@@ -86,9 +86,9 @@ inline vint v_cell_exit(const v_rays *r, const v_march_point *p, vint empty, vin
     const float3 o = r->o;
     const vpoint d = r->d;
     const float s = r->s;
-    const vint res = (vint)(L_C) >> lev;
-    /* SIDE_F / res: L_C >> lev = L_C / 2^lev exactly, and scaling by 2^lev is exact. */
-    const vfloat h = (SIDE_F / (float)L_C) * VF((vint)(1) << lev);
+    const vint res = (vint)(OCC_RES) >> lev;
+    /* SIDE_F / res: OCC_RES >> lev = OCC_RES / 2^lev exactly, and scaling by 2^lev is exact. */
+    const vfloat h = (SIDE_F / (float)OCC_RES) * VF((vint)(1) << lev);
     vcell i;
     i.x = p->cell.x >> lev;
     i.y = p->cell.y >> lev;
@@ -127,7 +127,7 @@ inline vint v_skip(const ngp_model *m, const v_rays *r, const v_march_point *p, 
 {
     const vint lev = CODE_LEVEL(code) - 1;
     const vint k_next = v_cell_exit(r, p, empty, lev);
-    const vint g = v_g_distance(m, p->u, empty & VMASK(((vint)(L_C) >> lev) < G_RES), CODE_G(code));
+    const vint g = v_g_distance(m, p->u, empty & VMASK(((vint)(OCC_RES) >> lev) < G_RES), CODE_G(code));
     if (!any(VMASK(g > 0))) return k_next;
     const vfloat radius = SIDE_F * VF(g) / (float)G_RES;
     const vint k_g = v_floor_i(v_min((p->t + radius) / r->s, v_k_limit(r)));
@@ -227,7 +227,7 @@ inline vint v_skip(const ngp_model *m, const v_rays *r, const v_march_point *p, 
                    vint code)
 {
     const vint lev = CODE_LEVEL(code) - 1;
-    const vint res = (vint)(L_C) >> lev;
+    const vint res = (vint)(OCC_RES) >> lev;
     vcell cell;
     cell.x = p->cell.x >> lev;
     cell.y = p->cell.y >> lev;

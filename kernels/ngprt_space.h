@@ -29,7 +29,8 @@ typedef struct {
     vint n_march, n_occ;   /* marching points, occupied samples */
 } v_rays;
 
-/* A lattice point of each lane: distance t, grid coordinates u, finest cell (L_C). */
+/* A lattice point of each lane: distance t, grid coordinates u, finest occupancy cell
+ * (OCC_RES; its coarse cell is it shifted right by OCC_SHIFT). */
 typedef struct {
     vfloat t;
     vpoint u;
@@ -114,7 +115,7 @@ inline v_march_point v_point_at(const v_rays *r, vint k)
     p.t = v_lattice_g(r, k);
 #endif
     p.u = v_point_u(r->o, r->d, p.t);
-    p.cell = v_cell(p.u, (vint)(L_C));
+    p.cell = v_cell(p.u, (vint)(OCC_RES));
     return p;
 }
 

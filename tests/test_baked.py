@@ -78,8 +78,8 @@ def _corrupt(arrays, manifest, case):
         idx[tuple(np.argwhere(idx >= 0)[0])] = arrays["coarse_blocks"].shape[0]
         return "coarse_block_index has values in"
     if case == "unknown version":
-        manifest["version"] = 3
-        return "unknown version 3"
+        manifest["version"] = 4
+        return "unknown version 4"
     if case == "no G metric":
         del manifest["G_metric"]
         return "manifest has no 'G_metric'"
@@ -232,6 +232,54 @@ def test_centre_metric_round_trips_and_version_1_files_load_as_box(model, tmp_pa
     old = write_raw(tmp_path / "v1.npz", arrays, dict(manifest, version=1,
                                                       arrays=listing(arrays)))
     assert load_baked(old).G_metric == "box"
+
+
+def test_finer_occupancy_round_trips_and_older_files_load_at_L_C(model, tmp_path):
+    """Version 3 holds occupancy finer than the coarse grid (the paper's grids); version 2
+    files (no ``occupancy_res``) still load with occupancy at L_C."""
+    fine = random_baked_model(small(occupancy_res=64, G_res=32, coarse_block=4), seed=1)
+    assert fine.arrays["occupancy_0"].shape == (64,) * 3 and fine.arrays["G"].shape == (32,) * 3
+    back = load_baked(save_baked(fine, tmp_path / "fine.npz"))
+    assert back.config.occ_res == 64 and back.config.occ_shift == 2
+    for name, a in fine.arrays.items():
+        np.testing.assert_array_equal(back.arrays[name], a, err_msg=name)
+    arrays, manifest = raw_from(model)
+    del manifest["config"]["occupancy_res"]
+    old = load_baked(write_raw(tmp_path / "v2.npz", arrays, dict(manifest, version=2,
+                                                                arrays=listing(arrays))))
+    assert old.config.occ_res == old.config.L_C == 16
+    # A fine occupied cell outside every coarse block is refused, as at L_C.
+    arrays, manifest = raw_from(fine)
+    absent = np.argwhere(arrays["coarse_block_index"] < 0)[0] * 4 * 4   # block -> fine cell
+    arrays["occupancy_0"][tuple(absent)] = 1
+    for lev, grid in enumerate(build_mip(arrays["occupancy_0"])):
+        arrays[f"occupancy_{lev}"] = grid
+    arrays["G"] = build_distance_grid(arrays["occupancy_0"], 32)
+    with pytest.raises(BakedFormatError, match="hold occupied occupancy_0 cells but are absent"):
+        load_baked(write_raw(tmp_path / "bad.npz", arrays, dict(manifest, arrays=listing(arrays))))
+
+
+@pytest.mark.parametrize("fields,message", [
+    ({"occupancy_res": 48}, "must be L_C=16 times a power of two"),
+    ({"occupancy_res": 8}, "must be L_C=16 times a power of two"),
+    ({"occupancy_res": 2048}, "above the maximum"),
+    ({"occupancy_res": 64, "G_res": 48}, "G_res=48 must divide the occupancy resolution 64"),
+])
+def test_occupancy_resolution_is_checked(fields, message):
+    with pytest.raises(ValueError, match=message):
+        small(**fields)
+
+
+def test_paper_grids_replace_only_the_empty_space_grids():
+    from clrender.ngprt.config import PRESETS, with_grids
+
+    cpu = PRESETS["cpu"]
+    paper = with_grids(cpu, "paper")
+    assert (paper.occ_res, paper.G_res, paper.occ_shift) == (512, 256, 2)
+    assert replace(paper, occupancy_res=None, G_res=cpu.G_res) == cpu
+    assert with_grids(cpu, "preset") == cpu and paper.s0 == cpu.s0
+    with pytest.raises(ValueError, match="grids 'huge'"):
+        with_grids(cpu, "huge")
 
 
 def test_sparse_coarse_grid_dense_and_callable_agree():

@@ -16,11 +16,14 @@ def test_rows_hold_counts_psnr_and_pairs(tmp_path):
     data = make_scene("unbounded", tmp_path / "scene", n_train=1, n_test=2, width=16, height=12)
     test_set = load_dataset(data, split="test")
     rows = ngprt_g_step.measure(path, test_set, None, views=1, repeats=2, sizes=["20x16"])
-    assert [r["row"] for r in rows] == ["paper w/o G", "w/ G, cut at jumps (box)",
-                                        "w/ G, cut at jumps, centre metric"]
-    base, box, centre = rows
+    grids = ", 32^3 / G 16^3"
+    assert [r["row"] for r in rows] == [n + grids for n in (
+        "paper w/o G", "w/ G, cut at jumps (box)", "w/ G, cut at jumps, centre metric",
+        "ours (box)")]
+    base, box, centre, ours = rows
     assert "pairs" not in base and base["same image"] is None
-    assert box["same image"] is True and box["Occupied"] == base["Occupied"]
+    for r in (box, ours):
+        assert r["same image"] is True and r["Occupied"] == base["Occupied"]
     for r in rows:
         assert r["Marching"] == pytest.approx(r["Occupied"] + r["Empty"]) and r["Marching"] > 0
     assert set(centre["pairs"]) == {"test", "20x16"} and centre["pairs"]["test"]["n"] == 2

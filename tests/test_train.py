@@ -393,6 +393,19 @@ def test_cli_and_api_from_run_to_video(tiny_run, tmp_path, capsys):
     with pytest.raises(SystemExit):             # argparse: not one of the choices
         cli.main(["bake", str(tiny_run["run"]), "--out", str(tmp_path / "x.npz"),
                   "--G-metric", "chebyshev"])
+    # The paper's grids: occupancy 512^3 .. 32^3 and G 256^3 from the same training run,
+    # within the preset's occupied cells, the coarse grid and weights as baked before;
+    # the same scene rendered (>= 30 dB against the preset grids' image).
+    paper = tmp_path / "paper.npz"
+    assert cli.main(["bake", str(tiny_run["run"]), "--out", str(paper), "--grids", "paper"]) == 0
+    fine = clrender.load(paper)
+    assert (fine.config.occ_res, fine.config.G_res, fine.config.L_C) == (512, 256, 32)
+    occ = fine.arrays["occupancy_0"].reshape((32, 16) * 3).max(axis=(1, 3, 5))
+    assert 0 < fine.arrays["occupancy_0"].sum() and np.all(occ <= box_model.arrays["occupancy_0"])
+    for name in ("coarse_blocks", "coarse_block_index", "fine_tables", "deferred_w0"):
+        np.testing.assert_array_equal(fine.arrays[name], box_model.arrays[name], err_msg=name)
+    from clrender.metrics import psnr
+    assert psnr(clrender.render(fine, cam), rgb) >= 30.0
 
 
 @pytest.mark.slow

@@ -248,7 +248,9 @@ def commit(plan: ModelPlan, files: dict[str, bytes], record: dict) -> None:
 def ensure_baked(entry: ModelEntry, method: str, options: dict) -> ModelEntry:
     """``entry`` with its run baked with ``options`` (the method's ``BAKE_OPTIONS``) into
     ``model-<name=value,...>.npz`` beside its ``model.npz`` (once, under the model's lock);
-    ``entry`` itself where ``options`` is empty."""
+    ``entry`` itself where every option has its default (what ``model.npz`` holds)."""
+    declared = methods.declared(methods.get(method), "BAKE_OPTIONS")
+    options = {k: v for k, v in options.items() if v != declared[k].default}
     if not options:
         return entry
     name = ",".join(f"{k}={options[k]}" for k in sorted(options))

@@ -1,10 +1,13 @@
-"""The paper's march with G, one change at a time (issue 45): the G step as it was (cut
-at every piece of an unbounded ray's lattice), cut only where the contracted path jumps,
-and with G of the paper's centre metric, each against the paper's march without G.
+"""The paper's march with G, one change at a time (issues 45, 46): the G step as it was
+(cut at every piece of an unbounded ray's lattice), cut only where the contracted path
+jumps, with G of the paper's centre metric, and our march, each against the paper's march
+without G; for one or more bakes of a model (e.g. its preset grids and the paper's).
 
     git archive f7bec39 kernels | tar -x -C /tmp/every-piece     # the step as it was
     python -m bench.studies.ngprt_g_step MODEL.npz --data data/bonsai --downscale 2 \\
         --old-kernels /tmp/every-piece/kernels --out results/
+    clrender bake RUN --out paper.npz --grids paper               # the paper's grids
+    python -m bench.studies.ngprt_g_step MODEL.npz paper.npz --data data/bonsai --downscale 2
 
 For each row: marching, occupied and empty points per ray and the occupancy + G reads
 per ray (means over every test view), PSNR against the test images and against the
@@ -13,7 +16,8 @@ the march without G as interleaved pairs (:func:`bench.tables.measure.time_pairs
 first ``--views`` test cameras, ``--repeats`` rounds, at the test size and at each
 ``--sizes``. The centre metric's model is ``MODEL`` with G rebuilt from its occupancy
 (what ``clrender bake --G-metric centre`` writes: the bakes differ in G alone). Writes
-``OUT/ngprt_g_step_<model stem>.{md,json}``; asserts nothing.
+``OUT/ngprt_g_step_<stems>.{md,json}`` (one table, each model's rows against its own
+march without G); asserts nothing.
 """
 from __future__ import annotations
 
@@ -69,23 +73,25 @@ def row_stats(renderer, base_images: list, test_set) -> dict:
 
 def measure(model_path: Path, test_set, old_kernels: Path | None, views: int, repeats: int,
             sizes, device=None) -> list[dict]:
-    """Every row's statistics and pairs against the march without G."""
+    """Every row's statistics and pairs against the march without G (of ``model_path``)."""
     Renderer = methods.get("ngprt").Renderer
     model = methods.load(model_path)
     rows = [("paper w/o G", model, {"use_G": False}),
             ("w/ G, cut at jumps (box)", model, {}),
-            ("w/ G, cut at jumps, centre metric", centre_variant(model), {})]
+            ("w/ G, cut at jumps, centre metric", centre_variant(model), {}),
+            ("ours (box)", model, {"march": "ours"})]
     if old_kernels is not None:
         rows.insert(1, ("w/ G, cut at every piece (box)", model,
                         {"kernel_dir": str(old_kernels)}))
     base = Renderer(model, device=device, march="paper", use_G=False)
     cams = test_set.cameras[:views]
     out, base_images = [], []
+    grids = f"{model.config.occ_res}^3 / G {model.config.G_res}^3"
     for name, m, options in rows:
-        r = Renderer(m, device=device, march="paper", **{"use_G": True, **options})
+        r = Renderer(m, device=device, **{"march": "paper", "use_G": True, **options})
         stats = row_stats(r, base_images, test_set)
         base_images = base_images or stats["images"]
-        rec = {"row": name, **{k: v for k, v in stats.items() if k != "images"}}
+        rec = {"row": f"{name}, {grids}", **{k: v for k, v in stats.items() if k != "images"}}
         if options.get("use_G", True):
             rec["pairs"] = {"test": _pairs(r, base, cams, repeats, test_set)}
             for size in sizes:
@@ -129,7 +135,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench.studies.ngprt_g_step",
                                 description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("model", type=Path, help="a baked NGP-RT model (box metric)")
+    p.add_argument("models", type=Path, nargs="+",
+                   help="baked NGP-RT models (box metric), e.g. one bake at each grids")
     p.add_argument("--data", type=Path, required=True, help="its dataset folder")
     p.add_argument("--downscale", type=int, default=1)
     p.add_argument("--old-kernels", type=Path, default=None,
@@ -141,12 +148,13 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=Path("results"))
     args = p.parse_args(argv)
     test_set = load_dataset(args.data, split="test", downscale=args.downscale)
-    rows = measure(args.model, test_set, args.old_kernels, args.views, args.repeats,
-                   args.sizes, args.device)
-    meta = {**options.run_meta(args.device), "model": str(args.model), "data": str(args.data),
-            "downscale": args.downscale, "views": len(test_set.cameras)}
+    rows = [row for path in args.models for row in measure(
+        path, test_set, args.old_kernels, args.views, args.repeats, args.sizes, args.device)]
+    meta = {**options.run_meta(args.device), "model": ", ".join(map(str, args.models)),
+            "data": str(args.data), "downscale": args.downscale,
+            "views": len(test_set.cameras)}
     text = markdown(rows, meta)
-    stem = args.out / f"ngprt_g_step_{args.model.stem}"
+    stem = args.out / f"ngprt_g_step_{'_'.join(m.stem for m in args.models)}"
     write_atomic(stem.with_suffix(".json"), json.dumps({**meta, "rows": rows}, indent=2))
     write_atomic(stem.with_suffix(".md"), text)
     print(text)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import sys
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 if sys.version_info >= (3, 11):
@@ -140,7 +140,7 @@ def _row(spec: dict, i: int, r: dict, path: Path) -> Row:
         plugin.check_model_options(model)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{path}: row {i} ({r.get('name')!r}): {exc}") from exc
-    bake = dict(r.get("bake", {}))
+    bake = {**spec.get("bake", {}), **r.get("bake", {})}     # the table's, then the row's
     for kind, given, allowed in (
             ("render", render, plugin.Renderer.RENDER_OPTIONS),
             ("bake", bake, methods.declared(plugin, "BAKE_OPTIONS"))):
@@ -237,6 +237,26 @@ def load_table(key: str) -> Table:
                  paired_stage=spec.get("paired_stage"),
                  paired_sizes=tuple(_sizes(spec.get("paired_sizes", ()), path)),
                  same_image=bool(spec.get("same_image", False)))
+
+
+def with_bake(table: Table, options: dict) -> Table:
+    """``table`` with bake ``options`` (``{name: value}`` of its methods' ``BAKE_OPTIONS``)
+    on every row, over the table's and the rows' own, under the key ``KEY-name-value``
+    (so its results files stand beside the table's); ``table`` itself without options."""
+    if not options:
+        return table
+    rows = []
+    for row in table.rows:
+        allowed = methods.declared(methods.get(row.method), "BAKE_OPTIONS")
+        for name, value in options.items():
+            if name not in allowed:
+                raise ValueError(f"{table.key}: bake option {name!r} is not among "
+                                 f"{sorted(allowed)} of method {row.method!r}")
+            allowed[name].check(name, value)
+        rows.append(replace(row, bake={**row.bake, **options}))
+    suffix = "-".join(f"{k}-{options[k]}" for k in sorted(options))
+    return replace(table, key=f"{table.key}-{suffix}", rows=tuple(rows),
+                   title=f"{table.title} ({', '.join(f'{k}={v}' for k, v in options.items())})")
 
 
 def _sizes(sizes, path: Path) -> list[str]:

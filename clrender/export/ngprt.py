@@ -64,8 +64,8 @@ def ngprt_assets(model, where: str) -> tuple[dict, dict]:
     """``(manifest fields, assets)`` of a validated NGP-RT model; :class:`ExportError`
     naming ``where`` and the limit when the page could not render it."""
     cfg, a = model.config, model.arrays
-    L.need(where, "MAX_3D_TEXTURE_SIZE", L.MAX_3D_TEXTURE_SIZE, cfg.L_C,
-           f"the occupancy grid (L_C = {cfg.L_C} cells a side, one 3D texture)")
+    L.need(where, "MAX_3D_TEXTURE_SIZE", L.MAX_3D_TEXTURE_SIZE, cfg.occ_res,
+           f"the occupancy grid ({cfg.occ_res} cells a side, one 3D texture)")
     ct = -(-cfg.coarse_channels // 4)
     blocks = np.asarray(a["coarse_blocks"], F32).reshape(-1, cfg.coarse_channels)
     assets = {f"occupancy_{lev}": np.ascontiguousarray(a[f"occupancy_{lev}"], np.uint8)
@@ -79,7 +79,7 @@ def ngprt_assets(model, where: str) -> tuple[dict, dict]:
                                        f"the hash tables ({cfg.L} x 2^{cfg.log2_T} entries)")
     assets["mlp"], offsets = _mlp_texture(model, where)
     consts = kernel_constants()
-    defines = {"L_C": cfg.L_C, "LEVELS": cfg.L, "T_SIZE": cfg.T, "G_RES": cfg.G_res,
+    defines = {"L_C": cfg.L_C, "OCC_RES": cfg.occ_res, "LEVELS": cfg.L, "T_SIZE": cfg.T, "G_RES": cfg.G_res,
                "CB": cfg.coarse_block, "CC": cfg.coarse_channels, "CT": ct,
                "N_ATT": cfg.n_attention, "VARIANT": VARIANT_CODES[cfg.variant],
                "UNBOUNDED": int(cfg.scene == "unbounded"), "HIDDEN": DEFERRED_HIDDEN,

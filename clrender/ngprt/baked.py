@@ -28,9 +28,11 @@ from .config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, MAX_LATTICE_POINT
                      ModelConfig)
 
 FORMAT = "clrender-ngprt"
-# Version 2 records G's metric (``G_metric``); version 1 files hold the box metric's G.
-VERSION = 2
-READ_VERSIONS = (1, 2)
+# Version 3 may hold occupancy finer than the coarse grid (config ``occupancy_res``, the
+# paper's grids); version 2 records G's metric (``G_metric``); version 1 files hold the
+# box metric's G. Older files read as they were written (occupancy at L_C).
+VERSION = 3
+READ_VERSIONS = (1, 2, 3)
 # What G measures (docs/ngprt.md "The occupancy distance grid G"): ``box``, from a voxel's
 # closest point to the nearest occupied voxel (no point within G of any point of the voxel
 # is occupied: the march takes the samples it takes without G); ``centre``, the paper's,
@@ -67,7 +69,7 @@ class BakedModel:
         return int(np.shape(self.arrays["coarse_blocks"])[0])
 
     def occupancy_mip(self) -> list[np.ndarray]:
-        """``[occupancy_0 .. occupancy_4]``, uint8 grids of resolution ``L_C >> lev``."""
+        """``[occupancy_0 .. occupancy_4]``, uint8 grids of resolution ``occ_res >> lev``."""
         return [self.arrays[f"occupancy_{lev}"] for lev in range(N_MIP)]
 
 
@@ -81,7 +83,7 @@ def expected_arrays(config: ModelConfig, n_blocks: int) -> dict:
         "fine_tables": ((c.L, c.T, FEATURES), F32),
     }
     for lev in range(N_MIP):
-        out[f"occupancy_{lev}"] = ((c.L_C >> lev,) * 3, U8)
+        out[f"occupancy_{lev}"] = ((c.occ_res >> lev,) * 3, U8)
     out["G"] = ((c.G_res,) * 3, U8)
     for name, shape in (("deferred_w0", (n_in, h)), ("deferred_b0", (h,)),
                         ("deferred_w1", (h, h)), ("deferred_b1", (h,)),
@@ -103,9 +105,9 @@ def build_mip(occupancy_0: np.ndarray) -> list[np.ndarray]:
     """The 5-level occupancy mip: ``occupancy_{lev+1}`` is the 2x max-pool of level lev.
 
     Args:
-        occupancy_0: (L_C, L_C, L_C) 0/1 (any dtype; nonzero is occupied).
+        occupancy_0: (R, R, R) 0/1 (any dtype; nonzero is occupied), R = occ_res.
     Returns:
-        [occupancy_0 .. occupancy_4], uint8 0/1 of resolutions L_C >> lev.
+        [occupancy_0 .. occupancy_4], uint8 0/1 of resolutions R >> lev.
     """
     level = (np.asarray(occupancy_0) != 0).astype(np.uint8)
     levels = [level]
@@ -138,7 +140,7 @@ def build_distance_grid(occupancy_0: np.ndarray, G_res: int, metric: str = "box"
     Capped at 255; 255 everywhere when all is empty.
 
     Args:
-        occupancy_0: (L_C, L_C, L_C) 0/1; G_res must divide L_C.
+        occupancy_0: (R, R, R) 0/1, R = occ_res; G_res must divide R.
     Returns:
         G: (G_res, G_res, G_res) uint8, in G-voxel units.
     """

@@ -16,14 +16,15 @@ from .encoding import SH_C
 
 VARIANTS = ("sum", "mlp", "shared-inv", "separate-inv", "shared-v", "separate-v")
 SCENES = ("bounded", "unbounded")
-N_MIP = 5                 # occupancy mip levels L_C, L_C/2, ..., L_C/16 (S2.5)
+N_MIP = 5                 # occupancy mip levels R, R/2, ..., R/16, R = occ_res (S2.5)
 T_STOP = 2e-3             # early ray termination threshold on transmittance (S2.5)
 FEATURES = 8              # deferred feature: density 1, diffuse rgb 3, specular 4
 SH_DIM = 16               # SH degree 4 view encoding (S2.1)
 DEFERRED_HIDDEN = 64      # MLP_psi: 23 -> 64 -> 64 -> 3 (S2.1)
 FUSION_HIDDEN = 64        # the `mlp` aggregation baseline: 8L -> 64 -> 8
 INT32_MAX = 2**31 - 1     # the kernels index and count with int
-# Most occupancy cells per axis: the mip's ~1.14 L_C^3 cells are indexed with int32.
+# Most occupancy cells per axis (L_C and occ_res): the mip's ~1.14 occ_res^3 cells are
+# indexed with int32.
 MAX_L_C = 1024
 # Most lattice points a ray may hold: the longest ray range over the step (S2.3), so a
 # tiny gamma cannot make a march run (almost) forever or overflow the kernels' int k.
@@ -71,11 +72,15 @@ class ModelConfig:
 
     Attributes:
         L: number of fine hash levels; resolutions 2*L_C, 4*L_C, ... (S2.1).
-        L_C: coarse grid resolution (voxels per axis), also the finest occupancy level.
+        L_C: coarse grid resolution (voxels per axis).
         log2_T: fine hash tables hold T = 2**log2_T entries of 8 features.
         variant: feature aggregation, one of VARIANTS (Table 3).
         scene: "bounded" ([-1, 1]^3) or "unbounded" (MERF contraction into [-2, 2]^3).
-        G_res: resolution of the occupancy distance grid G (paper: 256 for L_C = 512).
+        G_res: resolution of the occupancy distance grid G (paper: 256); divides occ_res.
+        occupancy_res: the finest occupancy level's resolution, ``L_C * 2^j`` (j >= 0);
+            None (the paper's ``L_C = 512``, and every trained model) ties it to L_C.
+            Only a bake sets it (``grids="paper"``: :data:`PAPER_GRIDS`): the occupancy
+            mip and G are rebuilt finer from the trained density, the model unchanged.
         coarse_block: voxels per side of a block of the sparse coarse grid.
         step_res: the lattice's base step is ``s0 = 2*sqrt(3)/step_res`` (S2.3); None
             (the paper) ties it to the coarse grid, ``step_res = L_C``.
@@ -95,6 +100,7 @@ class ModelConfig:
     variant: str = "separate-v"
     scene: str = "bounded"
     G_res: int = 256
+    occupancy_res: int | None = None
     coarse_block: int = 8
     step_res: int | None = None
     near: float = 0.05
@@ -119,6 +125,16 @@ class ModelConfig:
     @property
     def fine_resolutions(self) -> tuple[int, ...]:
         return tuple(self.L_C << (l + 1) for l in range(self.L))
+
+    @property
+    def occ_res(self) -> int:
+        """Cells per axis of the finest occupancy level (``occupancy_res``, else L_C)."""
+        return self.L_C if self.occupancy_res is None else self.occupancy_res
+
+    @property
+    def occ_shift(self) -> int:
+        """log2(occ_res / L_C): an occupancy cell shifted right by it is its coarse cell."""
+        return (self.occ_res // self.L_C).bit_length() - 1
 
     @property
     def extent(self) -> float:
@@ -175,7 +191,7 @@ class ModelConfig:
 
 _INT_FIELDS = ("L", "L_C", "log2_T", "G_res", "coarse_block", "aux_levels", "aux_min_res",
                "aux_log2_T", "aux_features", "aux_hidden")
-_OPTIONAL_INT_FIELDS = ("step_res",)    # None, or checked as the int fields
+_OPTIONAL_INT_FIELDS = ("step_res", "occupancy_res")    # None, or checked as the int fields
 
 
 def _type_problems(c: ModelConfig) -> list[str]:
@@ -217,8 +233,13 @@ def _size_problems(c: ModelConfig) -> list[str]:
     if c.L_C % (1 << (N_MIP - 1)) or c.L_C % c.coarse_block:
         problems.append(f"L_C={c.L_C} must be divisible by {1 << (N_MIP - 1)} "
                         f"and by coarse_block={c.coarse_block}")
-    if c.L_C % c.G_res:
-        problems.append(f"G_res={c.G_res} must divide L_C={c.L_C}")
+    ratio = c.occ_res // c.L_C
+    if c.occ_res > MAX_L_C:
+        problems.append(f"occupancy_res={c.occ_res} is above the maximum {MAX_L_C}")
+    if c.occ_res % c.L_C or ratio & (ratio - 1):
+        problems.append(f"occupancy_res={c.occ_res} must be L_C={c.L_C} times a power of two")
+    if c.occ_res % c.G_res:
+        problems.append(f"G_res={c.G_res} must divide the occupancy resolution {c.occ_res}")
     if c.aux_min_res > c.L_C:
         problems.append(f"aux_min_res={c.aux_min_res} must be <= L_C={c.L_C} (the auxiliary "
                         f"grids grow from aux_min_res to L_C)")
@@ -249,6 +270,20 @@ PRESETS: dict[str, ModelConfig] = {
     # For tests: trains in well under a minute.
     "tiny": ModelConfig(L_C=32, log2_T=14, G_res=16, aux_levels=3, aux_log2_T=14),
 }
+
+
+# The paper's empty-space grids (S2.5): occupancy 512^3 .. 32^3, G 256^3, whatever L_C a
+# model trained with (docs/ngprt.md "Grids").
+PAPER_GRIDS = {"occupancy_res": PRESETS["paper"].L_C, "G_res": PRESETS["paper"].G_res}
+GRIDS = ("preset", "paper")
+
+
+def with_grids(config: ModelConfig, grids: str) -> ModelConfig:
+    """``config`` with the empty-space grids ``grids``: ``preset`` (as trained) or
+    ``paper`` (:data:`PAPER_GRIDS`; needs ``L_C`` to divide 512 by a power of two)."""
+    if grids not in GRIDS:
+        raise ValueError(f"grids {grids!r}: expected one of {', '.join(GRIDS)}")
+    return config if grids == "preset" else replace(config, **PAPER_GRIDS)
 
 
 def preset(name: str, **overrides) -> ModelConfig:

@@ -36,10 +36,10 @@ def check_march(march: str) -> str:
 
 
 def g_in_codes(config) -> bool:
-    """Whether ``render_cl.exit_codes`` carries G: when ``L_C / G_res`` is a power of two,
-    the G voxel of a point is its finest cell shifted right (scaling by a power of two is
-    exact in float32, as for the mip levels)."""
-    ratio = config.L_C // config.G_res
+    """Whether ``render_cl.exit_codes`` carries G: when ``occ_res / G_res`` is a power of
+    two, the G voxel of a point is its finest cell shifted right (scaling by a power of two
+    is exact in float32, as for the mip levels)."""
+    ratio = config.occ_res // config.G_res
     return ratio & (ratio - 1) == 0
 
 
@@ -61,7 +61,7 @@ def occupancy_reads(march: str, exit_lev: np.ndarray) -> np.ndarray:
 def g_read(config, exit_lev: np.ndarray, use_G: bool) -> np.ndarray:
     """(M,) bool: the march reads G at empty points of exit level ``exit_lev`` (paper
     §4.3: only where that level is coarser than G)."""
-    return np.full(len(exit_lev), bool(use_G)) & ((config.L_C >> exit_lev) < config.G_res)
+    return np.full(len(exit_lev), bool(use_G)) & ((config.occ_res >> exit_lev) < config.G_res)
 
 
 def g_reads_counted(config, march: str) -> bool:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..methods import CONTRACT, Option, PaperSmoke, Stat
 from .baked import FORMAT, G_METRICS, load_baked
-from .config import PRESETS as _MODEL_PRESETS, VARIANTS
+from .config import GRIDS, PRESETS as _MODEL_PRESETS, VARIANTS
 from .engine import ENGINES
 from .marches import MARCHES
 from .render_cl import Renderer as _CLRenderer
@@ -28,6 +28,9 @@ BAKE_OPTIONS = {
                        "voxel's closest point: the march with G takes the samples it takes "
                        "without) or centre (the paper's, from the voxel's centre: longer steps)",
                        choices=G_METRICS, flag="--G-metric"),
+    "grids": Option(str, "preset", "the empty-space grids: preset (the occupancy the model "
+                    "trained with, from L_C) or paper (occupancy 512^3 .. 32^3 and G 256^3, "
+                    "from the trained density)", choices=GRIDS),
 }
 TEACHER = None
 ABLATIONS = Path(__file__).resolve().parent / "ablations"

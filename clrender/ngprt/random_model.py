@@ -76,8 +76,9 @@ def _corner_function(config: ModelConfig, shapes, thick: float, rng):
     return f
 
 
-def _occupancy(config: ModelConfig, shapes, thick: float) -> np.ndarray:
-    R, E = config.L_C, config.extent
+def _occupancy(config: ModelConfig, shapes, thick: float, R: int) -> np.ndarray:
+    """(R, R, R) uint8: cells whose centre lies within ``thick`` of a surface."""
+    E = config.extent
     centres = (np.arange(R) + 0.5) / R * (2 * E) - E
     c = np.stack(np.meshgrid(centres, centres, centres, indexing="ij"), -1).reshape(-1, 3)
     return (_surface_distance(c, shapes) < thick).reshape(R, R, R).astype(np.uint8)
@@ -101,7 +102,8 @@ def random_baked_model(config: ModelConfig, seed: int = 0, gamma: float = 1.0,
     """A valid, structured random :class:`BakedModel` of ``config`` (deterministic per seed).
 
     Args:
-        config: any variant, bounded or unbounded, L_C >= 16.
+        config: any variant, bounded or unbounded, L_C >= 16; with ``occ_res`` above L_C
+            the occupancy is the band at that resolution within the coarse cells' band.
         seed: random seed.
         gamma: step scaler of the model.
         shapes: the surfaces, ``(kind, centre (3,), radii (3,))`` in contracted space with
@@ -112,10 +114,15 @@ def random_baked_model(config: ModelConfig, seed: int = 0, gamma: float = 1.0,
     shapes = _shapes(rng, unbounded) if shapes is None else shapes
     # Band half-width: one coarse cell (at least 0.03) so surfaces are closed at any L_C.
     thick = max(2 * config.extent / config.L_C, 0.03)
-    occupancy_0 = _occupancy(config, shapes, thick)
+    coarse = _occupancy(config, shapes, thick, config.L_C)
     block_index, blocks = sparse_coarse_grid(_corner_function(config, shapes, thick, rng),
-                                             occupancy_0, config.coarse_block,
+                                             coarse, config.coarse_block,
                                              channels=config.coarse_channels)
+    occupancy_0 = coarse
+    if config.occ_res > config.L_C:
+        f = config.occ_res // config.L_C
+        inside = coarse.repeat(f, 0).repeat(f, 1).repeat(f, 2)
+        occupancy_0 = _occupancy(config, shapes, thick, config.occ_res) & inside
     arrays = _weights(config, rng)
     arrays["coarse_block_index"], arrays["coarse_blocks"] = block_index, blocks
     for lev, grid in enumerate(build_mip(occupancy_0)):

@@ -97,6 +97,7 @@ def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1,
     shared = kernel_constants()
     march = {
         **shared, **march_constants(), "L": config.L, "L_C": config.L_C,
+        "OCC_RES": config.occ_res, "OCC_SHIFT": config.occ_shift,
         "LOG2_T": config.log2_T, "VARIANT": VARIANT_CODES[config.variant],
         "UNBOUNDED": config.scene == "unbounded", "EXTENT": float(config.extent),
         "USE_G": bool(use_G), "G_RES": config.G_res,
@@ -138,7 +139,7 @@ def deferred_params(model) -> np.ndarray:
 
 def exit_codes(model, use_G: bool = True) -> np.ndarray:
     """The occupancy mip (and G) as the march reads them: one uint16 per finest cell
-    (``L_C^3``, C order). Low byte (bits below :data:`CODE_G_SHIFT`): 0 where ``occupancy_0`` is occupied (a sample), else
+    (``occ_res^3``, C order). Low byte (bits below :data:`CODE_G_SHIFT`): 0 where ``occupancy_0`` is occupied (a sample), else
     ``1 + exit level``, the coarsest empty level (docs/ngprt.md "The march"); the mip is
     a max-pool (validated), so the empty levels of a point are 0 .. exit level, all
     decided by its finest cell: one read per lattice point instead of up to five. High
@@ -146,17 +147,17 @@ def exit_codes(model, use_G: bool = True) -> np.ndarray:
     level coarser than G, :func:`g_in_codes`), else 0.
     """
     cfg = model.config
-    code = np.zeros((cfg.L_C,) * 3, np.uint16)
+    code = np.zeros((cfg.occ_res,) * 3, np.uint16)
     for lev in range(N_MIP):
-        r = cfg.L_C >> lev
+        r = cfg.occ_res >> lev
         a = np.asarray(model.arrays[f"occupancy_{lev}"])
         if a.shape != (r, r, r):
             raise ValueError(f"baked model: occupancy_{lev} has shape {a.shape}, "
                              f"expected ({r}, {r}, {r})")
         code += _upsampled(a == 0, 1 << lev)
     if use_G and g_in_codes(cfg):
-        G = _upsampled(np.asarray(model.arrays["G"], np.uint16), cfg.L_C // cfg.G_res)
-        exit_res = cfg.L_C >> np.maximum(code.astype(np.int64) - 1, 0)
+        G = _upsampled(np.asarray(model.arrays["G"], np.uint16), cfg.occ_res // cfg.G_res)
+        exit_res = cfg.occ_res >> np.maximum(code.astype(np.int64) - 1, 0)
         code |= np.where((code > 0) & (exit_res < cfg.G_res), G << CODE_G_SHIFT,
                          0).astype(np.uint16)
     return code.reshape(-1)
@@ -164,11 +165,11 @@ def exit_codes(model, use_G: bool = True) -> np.ndarray:
 
 def mip_levels(model) -> np.ndarray:
     """The occupancy mip as the paper's march reads it (``kernels/ngprt_paper.h``): the
-    ``N_MIP`` levels as uint8, finest first, each ``(L_C >> lev)^3`` cells in C order."""
+    ``N_MIP`` levels as uint8, finest first, each ``(occ_res >> lev)^3`` cells in C order."""
     cfg = model.config
     levels = [np.asarray(model.arrays[f"occupancy_{lev}"], np.uint8) for lev in range(N_MIP)]
     for lev, a in enumerate(levels):
-        r = cfg.L_C >> lev
+        r = cfg.occ_res >> lev
         if a.shape != (r, r, r):
             raise ValueError(f"baked model: occupancy_{lev} has shape {a.shape}, "
                              f"expected ({r}, {r}, {r})")

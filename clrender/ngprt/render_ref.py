@@ -84,11 +84,11 @@ def ray_range(cfg, o: np.ndarray, d: np.ndarray):
 def exit_level(model, u: np.ndarray) -> np.ndarray:
     """(M,) int: the first level, coarse (4) to fine (0), whose cell at u is empty; -1
     when u is occupied at every level (a sample)."""
-    mip, L_C = model.occupancy_mip(), model.config.L_C
+    mip, R = model.occupancy_mip(), model.config.occ_res
     out = np.full(len(u), -1, np.int64)
     undecided = np.ones(len(u), bool)
     for lev in range(N_MIP - 1, -1, -1):
-        i = cell_index(u[undecided], L_C >> lev)
+        i = cell_index(u[undecided], R >> lev)
         empty = mip[lev][i[:, 0], i[:, 1], i[:, 2]] == 0
         rows = np.flatnonzero(undecided)[empty]
         out[rows] = lev
@@ -152,7 +152,7 @@ def skip_bounded(model, k, t, o, d, u, exit_lev, g, s, g_end) -> np.ndarray:
     first point outside the cell, found by bisection (docs/ngprt.md "skip").
     """
     cfg = model.config
-    res = cfg.L_C >> exit_lev
+    res = cfg.occ_res >> exit_lev
     h = F32(2.0) / res.astype(F32)
     cell = _cells(u, res)
     lo = cell.astype(F32) * h[:, None] - F32(1.0)
@@ -227,7 +227,7 @@ def skip_unbounded(model, k, o, d, u, exit_lev, g, s, g_end, table) -> np.ndarra
     one until one is outside both or inside a shrunk box again. ``table``: the rays'
     :func:`space.lattice_table` rows; ``g_end`` their ``S(t_end)``."""
     cfg = model.config
-    res = cfg.L_C >> exit_lev
+    res = cfg.occ_res >> exit_lev
     cell = _cells(u, res)
     radius = g.astype(F32) / F32(cfg.G_res)        # u is in [0, 1]^3
     size = F32(4.0) / res.astype(F32)[:, None]     # a cell, in contracted units

@@ -98,6 +98,23 @@ TRAIN_PRESETS: dict[str, TrainConfig] = {
 }
 
 
+def step_scale(cfg: ModelConfig, u: torch.Tensor) -> torch.Tensor:
+    """(N,) largest world length of a unit of lattice distance at grid coordinates u
+    (N, 3), over directions (1 inside the unit cube). The unbounded lattice is uniform in
+    contracted space (docs/ngprt.md "Step lattice"); outside the cube, with ``m = |x|_inf``
+    and ``c_b`` the other two contracted coordinates, a contracted step dc is longest in
+    world space along the ray through the origin: ``|dx| = m^2 sqrt(1 + c_b^2 + c_b'^2) |dc|``,
+    ``m = 1 / (2 - |c|_inf)``."""
+    if cfg.scene == "bounded":
+        return torch.ones_like(u[:, 0])
+    c = u * 2 * cfg.extent - cfg.extent
+    mc = c.abs().amax(-1)
+    m = 1.0 / torch.clamp(2.0 - mc, min=1e-2)
+    rest = torch.clamp((c * c).sum(-1) - mc * mc, min=0.0)
+    scale = m * m * torch.sqrt(1.0 + rest)
+    return torch.where(mc <= 1.0, torch.ones_like(mc), torch.clamp(scale, max=1e4))
+
+
 class OccupancyGrid:
     """Training occupancy at L_C: EMA of per-cell alpha (density times step), as
     Instant-NGP / nerfacc; ``binary`` marks cells worth sampling.
@@ -111,22 +128,6 @@ class OccupancyGrid:
         self.cfg, self.R = cfg, cfg.L_C
         self.ema = torch.zeros(self.R ** 3, device=device)
         self.binary = torch.ones((self.R,) * 3, dtype=torch.bool, device=device)
-
-    def _step_scale(self, u: torch.Tensor) -> torch.Tensor:
-        """Largest world length of a unit of lattice distance at u, over directions (1
-        inside the unit cube). The unbounded lattice is uniform in contracted space
-        (docs/ngprt.md "Step lattice"); outside the cube, with ``m = |x|_inf`` and ``c_b``
-        the other two contracted coordinates, a contracted step dc is longest in world
-        space along the ray through the origin: ``|dx| = m^2 sqrt(1 + c_b^2 + c_b'^2) |dc|``,
-        ``m = 1 / (2 - |c|_inf)``."""
-        if self.cfg.scene == "bounded":
-            return torch.ones_like(u[:, 0])
-        c = u * 2 * self.cfg.extent - self.cfg.extent
-        mc = c.abs().amax(-1)
-        m = 1.0 / torch.clamp(2.0 - mc, min=1e-2)
-        rest = torch.clamp((c * c).sum(-1) - mc * mc, min=0.0)
-        scale = m * m * torch.sqrt(1.0 + rest)
-        return torch.where(mc <= 1.0, torch.ones_like(mc), torch.clamp(scale, max=1e4))
 
     @torch.no_grad()
     def update(self, model: NGPRT, step: int, warmup: int, fraction: float, decay: float,
@@ -149,7 +150,7 @@ class OccupancyGrid:
                 else cells[i:i + chunk]
             ijk = torch.stack([c // (self.R * self.R), (c // self.R) % self.R, c % self.R], -1)
             u = (ijk.to(torch.float32) + torch.rand(len(c), 3, device=dev)) / self.R
-            alpha = model.sample(u, corner_grid)[0] * self.cfg.s0 * self._step_scale(u)
+            alpha = model.sample(u, corner_grid)[0] * self.cfg.s0 * step_scale(self.cfg, u)
             self.ema[c] = torch.maximum(self.ema[c] * decay, alpha)
         thre = min(threshold, float(self.ema.mean()))
         self.binary = (self.ema > thre).reshape((self.R,) * 3)

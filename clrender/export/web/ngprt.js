@@ -19,7 +19,7 @@ export class NGPRT {
   constructor(gl, model, assets, src) {
     this.gl = gl;
     this.model = model;
-    const n = model.config.L_C;
+    const n = model.defines.OCC_RES;
     G.require(gl, "MAX_3D_TEXTURE_SIZE", n, "the occupancy grid");
     G.require(gl, "MAX_TEXTURE_IMAGE_UNITS", 10, "the march");
     this.textures = [];

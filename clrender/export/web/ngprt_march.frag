@@ -3,7 +3,7 @@
 // compositing, the deferred MLP, the background. The float32 operations of
 // clrender/ngprt/render_ref.py in its order; GLSL ES may contract a * b + c and round
 // division differently (docs/browser.md says what that changes).
-// Defines (clrender/export/ngprt.py): L_C LEVELS T_SIZE G_RES CB CC CT N_ATT VARIANT
+// Defines (clrender/export/ngprt.py): L_C OCC_RES LEVELS T_SIZE G_RES CB CC CT N_ATT VARIANT
 // UNBOUNDED HIDDEN FHIDDEN T_STOP SH_C0..10 VARIANT_* O_* (texel offsets in `mlp`).
 uniform highp usampler3D occ0, occ1, occ2, occ3, occ4, gridG;
 uniform highp isampler3D blockIndex;
@@ -39,7 +39,7 @@ ivec3 cell(vec3 u, int res) {
 }
 
 uint occ_at(int lev, vec3 u) {
-  ivec3 i = cell(u, L_C >> lev);
+  ivec3 i = cell(u, OCC_RES >> lev);
   if (lev == 0) return texelFetch(occ0, i.zyx, 0).r;
   if (lev == 1) return texelFetch(occ1, i.zyx, 0).r;
   if (lev == 2) return texelFetch(occ2, i.zyx, 0).r;
@@ -267,7 +267,7 @@ bool in_cell(vec3 o, vec3 d, int k, float s, int res, ivec3 c) {
 // Next lattice index after an empty point (docs/ngprt.md "skip", bounded): the mip cell's
 // exit, checked (bisection to the first point outside), and G's ball; the larger.
 int skip_bounded(int k, float t, vec3 o, vec3 d, vec3 u, int lev, float s, float g_end) {
-  int res = L_C >> lev;
+  int res = OCC_RES >> lev;
   float h = 2.0 / float(res);
   ivec3 c = cell(u, res);
   vec3 lo = vec3(c) * h - 1.0, hi = lo + h;
@@ -350,7 +350,7 @@ void main() {
         // G's step where G is read and > 0 (the paper's march), else the walk to the next
         // point: the same samples as the kernels' closed-form jumps, more points visited
         uint g = 0u;
-        if ((L_C >> lev) < G_RES) g = texelFetch(gridG, cell(u, G_RES).zyx, 0).r;
+        if ((OCC_RES >> lev) < G_RES) g = texelFetch(gridG, cell(u, G_RES).zyx, 0).r;
         k = g > 0u ? g_step_unbounded(k, g, s) : k + 1;
 #else
         k = skip_bounded(k, t, o, d, u, lev, s, g_end);
