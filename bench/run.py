@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
+import time
 from pathlib import Path
 
 from tqdm import tqdm
@@ -31,13 +32,15 @@ from clrender import methods
 
 
 def run_table(table, data: Path, fingerprint: str, args, meta: dict,
-              session: cluster.Session | None = None) -> str:
+              session: cluster.Session | None = None, started: float | None = None) -> str:
     """Train/bake what is missing (as Ray tasks of ``session`` first, when given), measure
     every row for each seed, write the table's files (their JSON lists the cache entries
-    used, each with what trained it)."""
+    used, each with what trained it, and ``wall_s``: seconds since ``started``, the
+    table's start by ``time.monotonic``, default this call's)."""
     from bench.tables.measure import measure_row
     from clrender.data import load_dataset
 
+    started = time.monotonic() if started is None else started
     test_set = load_dataset(data, split="test", downscale=args.downscale)
     seed_list = list(range(args.seed, args.seed + args.seeds))
     if session is not None:
@@ -66,7 +69,8 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict,
     cam = test_set.cameras[0]
     meta = {**meta, "resolution": f"{cam.width}x{cam.height}",
             "code": {m: code_fingerprint(m) for m in sorted({r.method for r in table.rows})},
-            "cache": {"root": str(args.cache), "models": used}}
+            "cache": {"root": str(args.cache), "models": used},
+            "wall_s": round(time.monotonic() - started, 1)}
     return report.write_table(args.out, table, results, meta)
 
 
@@ -157,12 +161,13 @@ def main(argv=None) -> int:
         with (cluster.Session(args.address, args.torch_device) if args.executor == "ray"
               else contextlib.nullcontext()) as session:
             for table in tables:
+                started = time.monotonic()     # the table's wall time includes its scene
                 scene = args.scene or table.scene
                 data = cache.resolve_scene(scene, args.cache)
                 fingerprint = cache.data_fingerprint(data, args.downscale)
                 meta.update(preset=args.preset or table.preset, scene=scene
                             if args.downscale == 1 else f"{scene} (downscale {args.downscale})")
-                print(run_table(table, data, fingerprint, args, meta, session))
+                print(run_table(table, data, fingerprint, args, meta, session, started))
         report.write_index(args.out)
         print(f"results written to {args.out}/")
     except ValueError as exc:

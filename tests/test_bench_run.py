@@ -150,7 +150,9 @@ def test_seeds_train_every_row_per_seed_and_the_index_lists_each_table(fake_trai
     assert fake_training == [("load", "test", 1), ("ngprt", 5, 1), ("ngprt", 6, 1),
                              ("ndrf", 5, 1), ("ndrf", 6, 1), ("pair", "5", "5"),
                              ("pair", "6", "6")]
-    rows = json.loads((tmp_path / "out" / "ndrf-teacher.json").read_text())["rows"]
+    data = json.loads((tmp_path / "out" / "ndrf-teacher.json").read_text())
+    assert data["wall_s"] >= 0                       # the table's wall time, for its conditions
+    rows = data["rows"]
     assert rows[0]["paired_speedup"] is None and rows[1]["paired_speedup"]["ratio"] == 1.5
     assert rows[0]["seeds"] == [5, 6] and rows[0]["PSNR"] == 25.5
     assert [p["model_key"] for p in rows[1]["per_seed"]] == ["ndrf-5", "ndrf-6"]

@@ -124,7 +124,8 @@ def count_claims(row, m, against, b) -> dict:
     return out
 
 
-def _counts_cell(rec: dict) -> str:
+def counts_cell(rec: dict) -> str:
+    """Each count of a claim: ours, the paper's and the verdict."""
     return "; ".join(f"{col} {c['ours']:.3f}x (paper {c['paper']:.3f}x): {c['verdict']}"
                      for col, c in rec["counts"].items())
 
@@ -155,12 +156,19 @@ def _delta_cell(rec: dict) -> str:
 
 
 def markdown(records: list[dict]) -> list[str]:
-    """The comparisons as Markdown lines (none for a table without comparisons)."""
+    """The comparisons as Markdown lines under a heading, then :data:`NOTE` (none for a
+    table without comparisons)."""
     if not records:
         return []
+    return ["### The paper's claims", "", *claims_table(records), "", NOTE, ""]
+
+
+def claims_table(records: list[dict]) -> list[str]:
+    """The comparisons (:func:`measure`'s records, or a table JSON's ``comparisons``) as
+    the lines of one Markdown table."""
     head = ["Comparison", "Claim", "ΔPSNR ours (dB)", "Interval", "ΔPSNR (paper)", "Verdict",
             "Speed-up", "Speed-up (paper)", "Speed verdict", "Counts (row / against)"]
-    lines = ["### The paper's claims", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in records:
         interval = ("" if r["lo"] is None else
                     f"[{r['lo']:+.2f}, {r['hi']:+.2f}] ({r['confidence']:.0%})")
@@ -169,8 +177,7 @@ def markdown(records: list[dict]) -> list[str]:
             "" if r["paper"] is None else f"{r['paper']:+.2f}", verdict_cell(r),
             speedup_cell(r["speedup"]),
             "" if r["speedup_paper"] is None else f"{r['speedup_paper']:.2f}x",
-            r["speed_verdict"], _counts_cell(r)]) + " |")
-    lines += ["", NOTE, ""]
+            r["speed_verdict"], counts_cell(r)]) + " |")
     return lines
 
 

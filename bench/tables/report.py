@@ -11,7 +11,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from bench.tables import columns, compare, seeds, summary
+from bench.tables import columns, compare, page, seeds, summary
 from clrender.atomic import write_atomic
 
 
@@ -262,8 +262,8 @@ def _spreads(table, m, stats: list[str]) -> dict | None:
 def _record(table, row, m, stats: list[str], speedup, sample: str) -> dict:
     """The JSON record of one row."""
     return {"row": row.name, "method": row.method, **row.model, **row.render, **row.bake,
-            "PSNR": m.psnr, "SSIM": m.ssim, "time_ms": m.time, "wall_ms": m.wall_ms,
-            "stages_ms": m.stages, "FPS": 1000.0 / m.time["median"],
+            "PSNR": m.psnr, "SSIM": m.ssim, "LPIPS": m.lpips, "time_ms": m.time,
+            "wall_ms": m.wall_ms, "stages_ms": m.stages, "FPS": 1000.0 / m.time["median"],
             "time_ms_at_width": {str(w): t for w, t in m.time_at.items()},
             **{c: m.stats.get(c) for c in stats}, "size_MB": m.size_MB,
             "train_minutes": m.train_minutes, "model_key": m.model_key,
@@ -349,25 +349,42 @@ def write_index(out_dir: Path) -> None:
 
 
 def main(argv=None) -> int:
-    """``python -m bench.tables.report [--results DIR] [--readme README.md]``: rewrite DIR/README.md
-    (summary and index) from DIR's tables; with ``--readme`` copy the summary into that file
-    between its ``<!-- results:begin -->`` and ``<!-- results:end -->`` lines."""
+    """``python -m bench.tables.report [--results DIR | --from DIR] [--docs PAGE]
+    [--readme README.md]``: rewrite DIR/README.md (summary and index) from the tables
+    ``bench.run`` wrote to DIR; or read the committed runs of ``--from`` (docs/results/,
+    nothing written there). ``--docs``: rewrite each run's block in PAGE
+    (:mod:`bench.tables.page`); ``--readme``: the summary, without dates, between the
+    file's ``<!-- results:begin -->`` and ``<!-- results:end -->`` lines. Both are computed
+    before either is written, each written atomically."""
     import argparse
     import sys
 
     p = argparse.ArgumentParser(prog="python -m bench.tables.report", description=main.__doc__)
-    p.add_argument("--results", type=Path, default=Path("results"),
-                   help="the folder bench.run wrote (default results/)")
-    p.add_argument("--readme", type=Path, default=None,
+    source = p.add_mutually_exclusive_group()
+    source.add_argument("--results", type=Path, default=Path("results"), metavar="DIR",
+                        help="the folder bench.run wrote (default results/)")
+    source.add_argument("--from", dest="runs", type=Path, default=None, metavar="DIR",
+                        help="a folder of committed table JSONs (docs/results/) to read instead")
+    p.add_argument("--docs", type=Path, default=None, metavar="PAGE",
+                   help="a Markdown page whose generated blocks to rewrite (docs/results.md)")
+    p.add_argument("--readme", type=Path, default=None, metavar="FILE",
                    help="a Markdown file to copy the summary into, between the markers")
     args = p.parse_args(argv)
+    folder = args.runs or args.results
     try:
-        if not args.results.is_dir():
-            raise ValueError(f"{args.results}: no such folder (run `python -m bench.run` first)")
-        write_index(args.results)
+        if not folder.is_dir():
+            raise ValueError(f"{folder}: no such folder (run `python -m bench.run` first)")
+        page_text = None if args.docs is None else page.filled(args.docs, folder)
+        if args.runs is None:
+            write_index(folder)
         if args.readme is not None:
-            changed = summary.copy_into(args.readme, summary.summary(args.results))
+            changed = summary.copy_into(args.readme, summary.summary(folder, dated=False))
             print(f"{args.readme}: summary {'updated' if changed else 'unchanged'}")
+        if page_text is not None:
+            changed = page_text != args.docs.read_text()
+            if changed:
+                write_atomic(args.docs, page_text)
+            print(f"{args.docs}: blocks {'updated' if changed else 'unchanged'}")
     except (ValueError, OSError) as exc:
         print(f"bench.tables.report: error: {exc}", file=sys.stderr)
         return 2

@@ -1,9 +1,10 @@
 """The results summary: one short table per paper table (each claim of the paper: our figure,
-the paper's, the verdict) from the tables' JSON (``results/<key>.json``, written by
-:func:`bench.tables.report.write_table`), and its copy into a README between two markers.
+the paper's, the verdict) from the tables' JSON (``results/<key>.json`` or the committed
+``docs/results/<key>.json``, written by :func:`bench.tables.report.write_table`), and its
+copy into a README between two markers.
 
 Examples:
-    >>> text = summary(Path("results"))
+    >>> text = summary(Path("docs/results"), dated=False)   # the README's: no dates
     >>> copy_into(Path("README.md"), text)      # between <!-- results:begin/end -->
 """
 from __future__ import annotations
@@ -25,29 +26,57 @@ def _ours(rec: dict) -> str:
     return f"{rec['mean']:+.2f} ± {rec['std']:.2f} [{rec['lo']:+.2f}, {rec['hi']:+.2f}]"
 
 
-def run_line(data: dict) -> str:
-    """Where and how a table was run: seeds, preset, scene, device, date, git revision."""
+def run_line(data: dict, dated: bool = True) -> str:
+    """Where and how a table was run: seeds, preset, scene, device and (``dated``) its date
+    and git revision."""
     n = len(data["rows"][0].get("seeds") or [None])
-    return (f"{n} seed{'s' if n > 1 else ''}, `{data['preset']}` preset, {data['scene']} "
-            f"scene, {data['device']}, {data['date']}, git {data['git_revision']}.")
+    line = (f"{n} seed{'s' if n > 1 else ''}, `{data['preset']}` preset, {data['scene']} "
+            f"scene, {data['device']}")
+    return line + (f", {data['date']}, git {data['git_revision']}." if dated else ".")
 
 
-def table_summary(data: dict) -> list[str]:
-    """Markdown lines of one table's summary from its JSON ``data``."""
-    lines = [f"### {data['title']}", "", run_line(data), ""]
+def _speedup(data: dict, rec: dict) -> str:
+    """Our speed-up of a claim at the test size, then at each size the row was timed at
+    against this very row (its baseline) as interleaved pairs."""
+    row = next(r for r in data["rows"] if r["row"] == rec["row"])
+    at = (row.get("paired_at") or {}) if row.get("baseline") == rec["against"] else {}
+    return "; ".join([compare.speedup_cell(rec["speedup"])]
+                     + [f"{size}: {compare.speedup_cell(s)}" for size, s in at.items() if s])
+
+
+def table_summary(data: dict, dated: bool = True) -> list[str]:
+    """Markdown lines of one table's summary from its JSON ``data`` (a column of counts
+    where a claim has some); ``dated``: :func:`run_line`'s date and revision."""
+    lines = [f"### {data['title']}", "", run_line(data, dated), ""]
     if not data["comparisons"]:
         return lines + ["No comparisons.", ""]
-    lines += ["| Claim | ΔPSNR ours (dB, interval) | ΔPSNR paper | Speed-up ours | "
-              "Speed-up paper | Verdict |", "|---|---|---|---|---|---|"]
+    counts = any(r.get("counts") for r in data["comparisons"])
+    head = ["Claim", "ΔPSNR ours (dB, interval)", "ΔPSNR paper", "Speed-up ours",
+            "Speed-up paper"] + (["Counts ours (paper): verdict"] if counts else []) + ["Verdict"]
+    lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in data["comparisons"]:
         claim = f"{r['row']} − {r['against']}" + (
             f" (equivalent within ±{r['margin']:.2f} dB)" if r["claim"] == "equivalent" else "")
         lines.append("| " + " | ".join([
             claim, _ours(r), "" if r["paper"] is None else f"{r['paper']:+.2f}",
-            compare.speedup_cell(r["speedup"]),
-            "" if r["speedup_paper"] is None else f"{r['speedup_paper']:.2f}x",
-            compare.verdict_cell(r)]) + " |")
+            _speedup(data, r),
+            "" if r["speedup_paper"] is None else f"{r['speedup_paper']:.2f}x"]
+            + ([compare.counts_cell(r)] if counts else []) + [compare.verdict_cell(r)]) + " |")
     return lines + [""]
+
+
+def read(path: Path) -> dict:
+    """A table's JSON, checked for what the summary and the results page read; a
+    ValueError naming ``path`` where it is not one."""
+    try:
+        data = json.loads(path.read_text())
+    except ValueError as exc:
+        raise ValueError(f"{path}: not a table written by bench.run ({exc})") from exc
+    missing = sorted(set(KEYS) - set(data)) if isinstance(data, dict) else KEYS
+    if missing or not data["rows"]:
+        raise ValueError(f"{path}: not a table written by bench.run (no {missing or 'rows'}; "
+                         "one written before its comparisons were recorded: run it again)")
+    return data
 
 
 def load(out_dir: Path) -> list[tuple[str, dict]]:
@@ -56,39 +85,39 @@ def load(out_dir: Path) -> list[tuple[str, dict]]:
     found = []
     for key in map(ablation.file_stem, ablation.list_tables()):
         path = out_dir / f"{key}.json"
-        if not path.is_file():
-            continue
-        try:
-            data = json.loads(path.read_text())
-        except ValueError as exc:
-            raise ValueError(f"{path}: not a table written by bench.run ({exc})") from exc
-        missing = sorted(set(KEYS) - set(data)) if isinstance(data, dict) else KEYS
-        if missing or not data["rows"]:
-            raise ValueError(f"{path}: not a table written by bench.run (no {missing or 'rows'}; "
-                             "one written before its comparisons were recorded: run it again)")
-        found.append((key, data))
+        if path.is_file():
+            found.append((key, read(path)))
     return found
 
 
-def summary(out_dir: Path) -> str:
-    """The summary of every table in ``out_dir`` (Markdown; a line saying so when none)."""
+def summary(out_dir: Path, dated: bool = True) -> str:
+    """The summary of every table in ``out_dir`` (Markdown; a line saying so when none).
+    ``dated``: each run's date and git revision, then the verdicts' rule
+    (:data:`bench.tables.compare.NOTE`); the README's summary has neither (both are in
+    docs/results.md)."""
     tables = load(out_dir)
     lines = []
     for _, data in tables:
-        lines += table_summary(data)
+        lines += table_summary(data, dated)
     if not tables:
         lines = [f"No table has been run into {out_dir}/ yet.", ""]
-    return "\n".join(lines + [compare.NOTE, ""])
+    return "\n".join(lines + ([compare.NOTE, ""] if dated else []))
+
+
+def replace_between(old: str, begin: str, end: str, text: str, where) -> str:
+    """``old`` with what lies between its one ``begin`` line and its one ``end`` line
+    replaced by ``text``; ``where`` names the file in the error where the lines are not so."""
+    if old.count(begin) != 1 or old.count(end) != 1 or old.index(begin) > old.index(end):
+        raise ValueError(f"{where}: expected one {begin} line before one {end} line")
+    head, rest = old.split(begin)
+    return head + begin + "\n" + text.strip("\n") + "\n" + end + rest.split(end)[1]
 
 
 def copy_into(readme: Path, text: str) -> bool:
     """Replace what lies between :data:`BEGIN` and :data:`END` in ``readme`` with ``text``
     (written atomically, only when it changes); returns whether it changed."""
     old = readme.read_text()
-    if old.count(BEGIN) != 1 or old.count(END) != 1 or old.index(BEGIN) > old.index(END):
-        raise ValueError(f"{readme}: expected one {BEGIN} line before one {END} line")
-    head, rest = old.split(BEGIN)
-    new = head + BEGIN + "\n" + text.strip("\n") + "\n" + END + rest.split(END)[1]
+    new = replace_between(old, BEGIN, END, text, readme)
     if new != old:
         write_atomic(readme, new)
     return new != old
