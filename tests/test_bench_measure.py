@@ -74,6 +74,12 @@ def test_paired_sizes_must_be_frame_sizes(tmp_path, monkeypatch):
         'model = { variant = "sum", L = 2 }\n')
     with pytest.raises(ValueError, match=r"bad.toml: paired_sizes: frame size '1920'"):
         ablation.load_table("bad")
+    (tmp_path / "bad.toml").write_text(
+        'title = "t"\npaper_source = "p"\nscene = "builtin-bounded"\npreset = "cpu"\n'
+        'paper_columns = ["PSNR"]\npaired_sizes = ["64x48"]\nverdict_size = "1920x1080"\n'
+        '[[rows]]\nname = "a"\nmodel = { variant = "sum", L = 2 }\n')
+    with pytest.raises(ValueError, match=r"verdict_size '1920x1080' is not one of paired_sizes"):
+        ablation.load_table("bad")
 
 
 def test_march_bound_counts_what_each_march_reads():

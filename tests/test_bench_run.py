@@ -93,6 +93,27 @@ def test_seeds_must_be_a_positive_count(capsys):
         assert f"--seeds: expected a whole number of seeds >= 1, got '{bad}'" in err
 
 
+def test_bake_option_reaches_every_row_under_its_own_key(tmp_path, capsys):
+    from bench.tables import ablation
+
+    table = ablation.load_table("table4")
+    paper = ablation.with_bake(table, run.bake_options(["grids=paper"]))
+    assert paper.key == "table4-grids-paper" and "grids=paper" in paper.title
+    assert all(r.bake["grids"] == "paper" for r in paper.rows)
+    centre = [r for r in paper.rows if "centre" in r.name]
+    assert centre and all(r.bake == {"G_metric": "centre", "grids": "paper"} for r in centre)
+    assert ablation.with_bake(table, {}) is table
+    with pytest.raises(ValueError, match="option 'grids' is 'huge'"):
+        ablation.with_bake(table, {"grids": "huge"})
+    with pytest.raises(ValueError, match="bake option 'grids' is not among"):
+        ablation.with_bake(ablation.load_table("ndrf-table3"), {"grids": "paper"})
+    with pytest.raises(ValueError, match="expected NAME=VALUE"):
+        run.bake_options(["grids"])
+    assert run.main(["table4", "--bake", "grid=paper", "--cache", str(tmp_path),
+                     "--out", str(tmp_path / "out")]) == 2
+    assert "bake option 'grid' is not among" in capsys.readouterr().err
+
+
 @pytest.fixture
 def fake_training(monkeypatch):
     """run.main without training or rendering: every (row, seed) gets a fake model whose

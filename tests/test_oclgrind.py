@@ -60,8 +60,12 @@ print("RENDERED camera", flush=True)
 digest = lambda a: hashlib.sha1(np.ascontiguousarray(a).tobytes()).hexdigest()[:12]
 for view, (scene, c2w) in enumerate(views):
     camera = Camera.from_fov(1.0, 10, 8, c2w)
-    for variant in VARIANTS:
-        config = preset("tiny", variant=variant, scene=scene, L_C=16, log2_T=8, G_res=8)
+    for variant in VARIANTS + ("separate-v/occ64",):
+        # "/occ64": occupancy finer than the coarse grid (the paper's grids in small: 64^3
+        # occupancy, G 32^3, L_C 16), both marches' exact builds with G.
+        fine = variant.endswith("/occ64")
+        config = preset("tiny", variant=variant.split("/")[0], scene=scene, L_C=16, log2_T=8,
+                        G_res=32 if fine else 8, occupancy_res=64 if fine else None)
         model = random_baked_model(config, 0, 1.0)
         # Every variant: the exact build with the device's lane width (1 on Oclgrind) and
         # the fast build with 16 rays / pixels per work-item. The lane code does not depend
@@ -69,6 +73,8 @@ for view, (scene, c2w) in enumerate(views):
         # also runs the exact build without G and the fast build at the other widths.
         # The paper's march (and the counting build) runs with separate-v only, too.
         builds = [(True, True, None, "ours"), (True, False, 16, "ours")]
+        if fine:
+            builds = [(True, True, None, "ours"), (True, True, None, "paper")]
         if variant == "separate-v":
             builds[1:1] = [(False, True, None, "ours")] + [
                 (True, False, w, "ours") for w in LANE_WIDTHS[:-1]]
@@ -117,7 +123,7 @@ def test_kernels_clean_under_oclgrind():
     require(shutil.which("oclgrind") is not None, "oclgrind (apt install oclgrind)")
     proc, log, errors = _oclgrind(SCRIPT)
     assert_clean(proc, log, errors)
-    assert log.count("RENDERED") == 1 + 3 * (5 * 2 + 9), log[-4000:]
+    assert log.count("RENDERED") == 1 + 3 * (5 * 2 + 9 + 2), log[-4000:]
     builds = {}
     for line in log.splitlines():
         f = line.split()
@@ -126,10 +132,11 @@ def test_kernels_clean_under_oclgrind():
                 {"G": f[3] == "True", "lanes": f[5], "n_march": int(f[6]), "n_occ": int(f[7]),
                  "march_digest": f[8], "occ_digest": f[9], "rgb_diff": float(f[10]),
                  "march": f[11], "reads_digest": f[12]})
-    assert len(builds) == 18, sorted(builds)
+    assert len(builds) == 21, sorted(builds)
     for (view, variant), rows in builds.items():
         widths = ["None", "None", "1", "2", "4", "8", "16", "None", "16"] if (
-            variant == "separate-v") else ["None", "16"]
+            variant == "separate-v") else ["None", "None"] if variant.endswith("/occ64") \
+            else ["None", "16"]
         assert [r["lanes"] for r in rows] == widths, rows
         # Every build samples the same points, pixel by pixel, and some.
         assert len({r["occ_digest"] for r in rows}) == 1 and rows[0]["n_occ"] > 0, (view, rows)

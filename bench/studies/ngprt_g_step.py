@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -41,10 +40,9 @@ STATS = (("Marching", "n_march"), ("Occupied", "n_occ"), ("Empty", "n_empty"),
 
 def centre_variant(model):
     """``model`` with G of the paper's centre metric, rebuilt from its occupancy."""
-    from clrender.ngprt.baked import build_distance_grid, validate
+    from clrender.ngprt.baked import validate, with_G_metric
 
-    G = build_distance_grid(model.arrays["occupancy_0"], model.config.G_res, "centre")
-    out = replace(model, G_metric="centre", arrays={**model.arrays, "G": G})
+    out = with_G_metric(model, "centre")
     validate(out, "centre-metric variant")
     return out
 

@@ -78,10 +78,13 @@ class Table:
     # Rows with a baseline are timed against it as interleaved pairs (bench.tables.measure
     # .measure_pair) on the renderer's ms_<paired_stage> (None: the frame), at the test
     # size and at paired_sizes ("WxH"); same_image: a row must render its baseline's image
-    # (unless the row says otherwise: Table.row_same_image).
+    # (unless the row says otherwise: Table.row_same_image); verdict_size: the one of
+    # paired_sizes the paper timed at, whose pairs judge its speed claims (None: the test
+    # size).
     paired_stage: str | None = None
     paired_sizes: tuple[str, ...] = ()
     same_image: bool = False
+    verdict_size: str | None = None
 
     @property
     def stem(self) -> str:
@@ -140,7 +143,7 @@ def _row(spec: dict, i: int, r: dict, path: Path) -> Row:
         plugin.check_model_options(model)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{path}: row {i} ({r.get('name')!r}): {exc}") from exc
-    bake = {**spec.get("bake", {}), **r.get("bake", {})}     # the table's, then the row's
+    bake = dict(r.get("bake", {}))
     for kind, given, allowed in (
             ("render", render, plugin.Renderer.RENDER_OPTIONS),
             ("bake", bake, methods.declared(plugin, "BAKE_OPTIONS"))):
@@ -236,6 +239,7 @@ def load_table(key: str) -> Table:
                  comparisons=_comparisons(spec, rows, path),
                  paired_stage=spec.get("paired_stage"),
                  paired_sizes=tuple(_sizes(spec.get("paired_sizes", ()), path)),
+                 verdict_size=_verdict_size(spec, path),
                  same_image=bool(spec.get("same_image", False)))
 
 
@@ -257,6 +261,14 @@ def with_bake(table: Table, options: dict) -> Table:
     suffix = "-".join(f"{k}-{options[k]}" for k in sorted(options))
     return replace(table, key=f"{table.key}-{suffix}", rows=tuple(rows),
                    title=f"{table.title} ({', '.join(f'{k}={v}' for k, v in options.items())})")
+
+
+def _verdict_size(spec: dict, path: Path) -> str | None:
+    size = spec.get("verdict_size")
+    if size is not None and size not in spec.get("paired_sizes", ()):
+        raise ValueError(f"{path}: verdict_size {size!r} is not one of paired_sizes "
+                         f"{spec.get('paired_sizes', [])}")
+    return size
 
 
 def _sizes(sizes, path: Path) -> list[str]:

@@ -19,10 +19,11 @@ def _time(m) -> float:
     return m.time["median"]
 
 
-def speedup(m_row, m_against, row, against) -> dict:
+def speedup(m_row, m_against, row, against, size: str | None = None) -> dict:
     """{ratio: against's time over row's (>1: row faster)}, with ``lo``, ``hi``, ``n`` where
-    the row's result carries a ``paired_speedup`` against this very row (its baseline)."""
-    paired = m_row.paired_speedup
+    the row's result carries pairs against this very row (its baseline): the test size's
+    (``paired_speedup``), or at ``size`` ("WxH", ``paired_at``) where given."""
+    paired = m_row.paired_speedup if size is None else (m_row.paired_at or {}).get(size)
     if paired is not None and row.baseline == against.name:
         return {k: paired[k] for k in ("ratio", "lo", "hi", "n")}
     return {"ratio": _time(m_against) / _time(m_row)}
@@ -68,7 +69,8 @@ def measure(table, results: list) -> list[dict]:
                        seeds_needed=seeds.seeds_to_resolve(target, std, conf)
                        if verdict == "underpowered" else None)
         t_row, t_against = row.paper.get("Time (ms)"), against.paper.get("Time (ms)")
-        rec["speedup"] = speedup(m, b, row, against)
+        rec["speedup"] = speedup(m, b, row, against, table.verdict_size)
+        rec["speed_size"] = table.verdict_size
         rec["speedup_paper"] = None if t_row is None or t_against is None else t_against / t_row
         rec["speed_verdict"] = speed_verdict(rec["speedup"], rec["speedup_paper"])
         rec["counts"] = count_claims(row, m, against, b)
@@ -175,7 +177,7 @@ def claims_table(records: list[dict]) -> list[str]:
         lines.append("| " + " | ".join([
             f"{r['row']} − {r['against']}", claim_cell(r), _delta_cell(r), interval,
             "" if r["paper"] is None else f"{r['paper']:+.2f}", verdict_cell(r),
-            speedup_cell(r["speedup"]),
+            speedup_cell(r["speedup"]) + (f" at {r['speed_size']}" if r.get("speed_size") else ""),
             "" if r["speedup_paper"] is None else f"{r['speedup_paper']:.2f}x",
             r["speed_verdict"], counts_cell(r)]) + " |")
     return lines
@@ -193,8 +195,9 @@ NOTE = ("ΔPSNR: the first row's PSNR minus the second's trained with the same s
         "Each verdict stands alone: no correction for the number of comparisons; the seeds "
         "were fixed before the run. Speed-up: the second row's time over the first's; with "
         "an interval where measured as interleaved pairs (95% t over the pairs' log ratios), "
-        "judged against the paper's: \"reproduces\" where the interval excludes 1 on the "
-        "paper's side. Counts: exact, row over against; \"reproduces\" where ours moves "
+        "judged against the paper's at the size the paper timed (where the table names one, "
+        "e.g. Table 4 at 1920x1080; else the test size): \"reproduces\" where the interval "
+        "excludes 1 on the paper's side. Counts: exact, row over against; \"reproduces\" where ours moves "
         f"the paper's way by at least {COUNT_SHARE:g} of the paper's relative change (or "
         "stays equal where the paper's does), \"direction only\" where it moves that way by "
         "less. A table whose rows must not change the image (Table 4) has their images "

@@ -36,12 +36,15 @@ def run_line(data: dict, dated: bool = True) -> str:
 
 
 def _speedup(data: dict, rec: dict) -> str:
-    """Our speed-up of a claim at the test size, then at each size the row was timed at
-    against this very row (its baseline) as interleaved pairs."""
+    """Our speed-up of a claim (at the size its verdict is judged at, where not the test
+    size), then at each other size the row was timed at against this very row (its
+    baseline) as interleaved pairs."""
     row = next(r for r in data["rows"] if r["row"] == rec["row"])
     at = (row.get("paired_at") or {}) if row.get("baseline") == rec["against"] else {}
-    return "; ".join([compare.speedup_cell(rec["speedup"])]
-                     + [f"{size}: {compare.speedup_cell(s)}" for size, s in at.items() if s])
+    judged = rec.get("speed_size")
+    return "; ".join([compare.speedup_cell(rec["speedup"]) + (f" at {judged}" if judged else "")]
+                     + [f"{size}: {compare.speedup_cell(s)}" for size, s in at.items()
+                        if s and size != judged])
 
 
 def table_summary(data: dict, dated: bool = True) -> list[str]:

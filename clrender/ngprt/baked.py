@@ -157,6 +157,15 @@ def build_distance_grid(occupancy_0: np.ndarray, G_res: int, metric: str = "box"
     return np.minimum(np.floor(distance_transform_edt(~occ)), 255).astype(np.uint8)
 
 
+def with_G_metric(model: "BakedModel", metric: str) -> "BakedModel":
+    """``model`` with G of ``metric`` rebuilt from its finest occupancy (``model`` itself
+    where it has that metric already)."""
+    if metric == model.G_metric:
+        return model
+    G = build_distance_grid(model.arrays["occupancy_0"], model.config.G_res, metric)
+    return BakedModel(model.config, model.gamma, {**model.arrays, "G": G}, metric)
+
+
 def sparse_coarse_grid(corner_values, occupancy_0: np.ndarray, B: int,
                        channels: int | None = None):
     """The sparse coarse grid: blocks of B^3 cells holding (B+1)^3 corner values.
