@@ -110,6 +110,8 @@ def reconstruct(db: Path, images: Path, out: Path, threads: int, seed: int = 0,
     if mapper == "global":
         options = pycolmap.GlobalPipelineOptions(num_threads=threads, random_seed=seed,
                                                  min_model_size=MIN_MODEL_SIZE)
+        options.mapper.global_positioning.use_gpu = False      # the CPU wheel: no CUDA
+        options.mapper.bundle_adjustment.ceres.use_gpu = False
         with tqdm(total=1, desc="mapping (global)", unit="model", disable=None) as bar:
             found = pycolmap.global_mapping(db, images, out, options)
             bar.update()
