@@ -60,7 +60,7 @@ def _cmd_capture(args) -> int:
 
     report = capture(args.src, args.out, max_frames=args.frames, matcher=args.matcher,
                      bounded=args.bounded, downscale=args.downscale, force=args.force,
-                     threads=args.threads)
+                     threads=args.threads, mapper=args.mapper)
     print(format_report(report))
     print(f"wrote {args.out} (train with: clrender train {args.out} --out RUN"
           f"{f' --downscale {args.downscale}' if args.downscale else ''})")
@@ -186,6 +186,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a video's frames to keep, the sharpest of each window (default 200)")
     s.add_argument("--matcher", default="auto", choices=["auto", "exhaustive", "sequential"],
                    help="auto: exhaustive for up to 300 photos, else sequential (video too)")
+    s.add_argument("--mapper", default="incremental", choices=["incremental", "global"],
+                   help="incremental (COLMAP's, registers one image at a time) or global "
+                        "(GLOMAP's: all rotations, then all positions; no drift round an "
+                        "orbit, see docs/capture.md)")
     s.add_argument("--bounded", action=argparse.BooleanOptionalAction, default=None,
                    help="an object capture, scaled into [-1, 1]^3 (default: when every "
                         "photo has a transparent background)")

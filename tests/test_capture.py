@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from capture_scene import corner_views
 from dataset_fixtures import write_colmap
-from scipy.ndimage import gaussian_filter
+from scipy.ndimage import binary_dilation, gaussian_filter
 
-from clrender.capture import capture, pose_errors, sfm, umeyama
+from clrender.capture import capture, pose_errors, sfm, silhouette, umeyama
 from clrender.capture.box import scene_box
 from clrender.capture.frames import copy_photos
 from clrender.capture.video import window_picks
@@ -140,6 +140,17 @@ def test_capture_resumes_from_its_work_folder(captured, photos):
     assert redone["registered"] == VIEWS and (out / "images_2").is_dir()
 
 
+def test_global_mapping_recovers_the_poses_and_reuses_the_matches(captured, photos,
+                                                                    tmp_path):
+    out, _ = captured
+    shutil.copytree(out.with_name(out.name + ".work"), tmp_path / "data.work")
+    report = capture(photos[0], tmp_path / "data", bounded=True, mapper="global")
+    assert all(report["stages"][s]["skipped"] for s in ("frames", "features", "matching"))
+    assert not report["stages"]["mapping"]["skipped"] and report["mapper"] == "global"
+    assert report["registered"] == VIEWS
+    assert_poses_recovered(tmp_path / "data", photos[1])
+
+
 # -- video --------------------------------------------------------------------------------
 
 def test_window_picks_the_sharpest_of_each_window():
@@ -232,7 +243,7 @@ def test_disconnected_models_keep_the_largest_and_say_so(tmp_path, monkeypatch, 
         def compute_mean_reprojection_error(self):
             return 0.5
 
-    def two_models(db, images, out, threads, seed=0):
+    def two_models(db, images, out, threads, seed=0, mapper="incremental"):
         shutil.copytree(out.parent / "frames", out / "1")   # stands in for model folders
         return {0: Model(3), 1: Model(7)}
 
@@ -257,11 +268,13 @@ def test_transparent_photos_are_composited_on_white_and_flag_an_object(tmp_path)
     rgba[2:6, 2:6] = [200, 10, 10, 255]
     for i in range(3):
         iio.imwrite(src / f"r_{i}.png", rgba)
-    info = copy_photos(src, dest)
+    (tmp_path / "masks").mkdir()
+    info = copy_photos(src, dest, tmp_path / "masks")
     assert info["transparent"] and info["given"] == 3
     out = iio.imread(dest / "r_0.png")
     assert out.shape == (8, 8, 3) and (out[0, 0] == 255).all()
     assert (out[3, 3] == [200, 10, 10]).all()
+    np.testing.assert_array_equal(iio.imread(tmp_path / "masks" / "r_0.png"), rgba[..., 3])
 
 
 def test_scene_box_holds_the_points_but_outliers():
@@ -307,3 +320,126 @@ def test_cli_prints_the_report_and_names_bad_input(captured, photos, tmp_path, c
     assert f"registered {VIEWS} of {VIEWS} images" in printed and "camera SIMPLE_RADIAL" in printed
     assert main(["capture", str(tmp_path / "nowhere"), "--out", str(tmp_path / "d")]) == 2
     assert "nowhere: no such folder or video" in capsys.readouterr().err
+
+
+# -- object captures: cameras checked against the silhouettes -----------------------------
+
+def l_shaped_object(tmp_path):
+    """A model of an L-shaped cloud of points seen by camera "true.png" from -z and by
+    "turned.png", the same camera turned 180 degrees about the object's vertical axis (on
+    the far side), both given the silhouette that "true.png" sees (its points, dilated)."""
+    rng = np.random.default_rng(0)
+    bar = rng.uniform([-1, -0.2, -0.2], [1, 0.2, 0.2], (300, 3))
+    post = rng.uniform([0.6, 0.2, -0.2], [1, 1.2, 0.2], (150, 3))
+    rec = sfm.pycolmap.Reconstruction()
+    camera = sfm.pycolmap.Camera(model="PINHOLE", width=64, height=64, camera_id=1,
+                                 params=[40, 40, 32, 32])
+    rec.add_camera_with_trivial_rig(camera)
+    turn = np.diag([-1.0, 1.0, -1.0])                      # 180 degrees about y
+    for image_id, (name, R) in enumerate((("true.png", np.eye(3)), ("turned.png", turn)), 1):
+        rec.add_image_with_trivial_frame(
+            sfm.pycolmap.Image(name=name, camera_id=1, image_id=image_id),
+            sfm.pycolmap.Rigid3d(sfm.pycolmap.Rotation3d(R), np.array([0, 0, 5.0])))
+    for xyz in np.concatenate([bar, post]):
+        rec.add_point3D(xyz, sfm.pycolmap.Track())
+    uv = np.asarray(camera.img_from_cam(np.concatenate([bar, post]) + [0, 0, 5.0]))
+    mask = np.zeros((64, 64), bool)
+    mask[uv[:, 1].astype(int), uv[:, 0].astype(int)] = True
+    alpha = binary_dilation(mask, iterations=2).astype(np.uint8) * 255
+    masks = tmp_path / "masks"
+    masks.mkdir()
+    for name in ("true", "turned"):
+        iio.imwrite(masks / f"{name}.png", alpha)
+    return rec, masks
+
+
+def test_a_camera_turned_about_an_object_is_refuted_by_its_silhouette(tmp_path):
+    rec, masks = l_shaped_object(tmp_path)
+    shares = silhouette.outside_share(rec, masks)
+    assert shares["true.png"] == 0.0                       # every point inside, by making
+    assert shares["turned.png"] > silhouette.OUTSIDE_MAX   # the post seen mirrored
+    assert set(silhouette.refuted(rec, masks)) == {"turned.png"}
+
+
+def captured_model(captured):
+    """(the photo capture's Reconstruction, a copy of its mapping database)."""
+    out, _ = captured
+    work = out.with_name(out.name + ".work")
+    rec = sfm.read_model(work / "sparse" / json.loads((work / "mapping.json").read_text())
+                         ["chosen"])
+    return rec, work / "mapping.db"
+
+
+def test_mapping_takes_the_guessed_focal_length_for_a_prior(captured):
+    _, db = captured_model(captured)
+    cameras = {}
+    for name in ("features.db", "mapping.db"):
+        database = sfm.pycolmap.Database.open(db.with_name(name))
+        cameras[name] = database.read_all_cameras()
+        database.close()
+    assert [c.has_prior_focal_length for c in cameras["features.db"]] == [False]
+    assert [c.has_prior_focal_length for c in cameras["mapping.db"]] == [True]
+    assert cameras["mapping.db"][0].params[0] == cameras["features.db"][0].params[0]
+
+
+def test_pairs_that_fit_a_refuted_pose_are_removed_and_others_kept(captured, tmp_path):
+    rec, db = captured_model(captured)
+    name = rec.images[rec.reg_image_ids()[0]].name
+    shutil.copyfile(db, tmp_path / "fit.db")       # its pose is right: every pair fits it
+    removed = silhouette.prune_pairs(tmp_path / "fit.db", rec, [name])
+    assert removed and all(name in pair for pair in removed)
+    database = sfm.pycolmap.Database.open(tmp_path / "fit.db")
+    _, left = database.read_two_view_geometries()
+    database.close()
+    _, before = sfm.pycolmap.Database.open(db).read_two_view_geometries()
+    assert len(left) == len(before) - len(removed)
+    image = rec.images[rec.reg_image_ids()[0]]    # turned: none of its pairs fits it
+    pose = image.cam_from_world().matrix()
+    turned = np.diag([-1.0, 1.0, -1.0]) @ pose
+    rec.frames[image.frame_id].rig_from_world = sfm.pycolmap.Rigid3d(
+        sfm.pycolmap.Rotation3d(turned[:, :3]), turned[:, 3])
+    shutil.copyfile(db, tmp_path / "turned.db")
+    assert silhouette.prune_pairs(tmp_path / "turned.db", rec, [name]) == []
+
+
+@pytest.fixture
+def object_photos(photos, tmp_path):
+    """The photos with one transparent pixel each: an object capture, so masks/ and the
+    silhouette check (whose verdict the tests stand in for)."""
+    folder = tmp_path / "object"
+    folder.mkdir()
+    for file in sorted(photos[0].iterdir()):
+        rgba = np.concatenate([iio.imread(file), np.full((SIZE, SIZE, 1), 255, np.uint8)], -1)
+        rgba[0, 0, 3] = 0
+        iio.imwrite(folder / file.name, rgba)
+    return folder
+
+
+def test_a_refuted_camera_is_mapped_again_without_the_pairs_that_placed_it(
+        object_photos, tmp_path, monkeypatch):
+    checked = []
+
+    def refute_img3(rec, masks):          # stands in for a turned camera: IMG_003.png
+        checked.append(sorted(rec.images[i].name for i in rec.reg_image_ids()))
+        assert (masks / "IMG_003.png").is_file()
+        return {"IMG_003.png": 0.5} if "IMG_003.png" in checked[-1] else {}
+
+    monkeypatch.setattr(silhouette, "refuted", refute_img3)
+    report = capture(object_photos, tmp_path / "data")
+    assert len(checked) == 2 and "IMG_003.png" not in checked[1]
+    rounds = report["refuted"]["rounds"]
+    assert rounds[0]["cameras"] == {"IMG_003.png": 0.5} and rounds[0]["pairs_removed"] > 0
+    assert report["registered"] == VIEWS - 1 and report["refuted"]["left_out"] == []
+
+
+def test_a_camera_refuted_after_every_mapping_is_left_out(object_photos, tmp_path,
+                                                          monkeypatch, capsys):
+    monkeypatch.setattr(silhouette, "refuted", lambda rec, masks: (
+        {"IMG_003.png": 0.5} if rec.find_image_with_name("IMG_003.png").has_pose else {}))
+    monkeypatch.setattr(silhouette, "prune_pairs", lambda *a: [])   # nothing to remove
+    report = capture(object_photos, tmp_path / "data")
+    assert report["registered"] == VIEWS - 1
+    assert report["refuted"]["left_out"] == ["IMG_003.png"]
+    names, _ = recovered_c2w(tmp_path / "data")
+    assert "IMG_003.png" not in names and len(names) == VIEWS - 1
+    assert "left out: IMG_003.png" in capsys.readouterr().err

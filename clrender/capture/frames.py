@@ -28,11 +28,12 @@ def check_count(n: int, where: Path) -> None:
                          f"needs at least {MIN_FRAMES}")
 
 
-def copy_photos(src: Path, dest: Path) -> dict:
+def copy_photos(src: Path, dest: Path, masks: Path | None = None) -> dict:
     """Check the photos of ``src`` and write them to ``dest`` (an existing empty folder).
 
     Opaque images are copied byte for byte; images with transparent pixels are composited
-    on white and written as PNG under the same stem.
+    on white and written as PNG under the same stem, and their alpha (8 bits) to
+    ``masks/<stem>.png`` when ``masks`` (an existing folder) is given.
     Returns:
         {"source": "photos", "given": N, "size": [W, H], "transparent": bool (all images
         had transparent pixels: an object on an empty background)}.
@@ -53,6 +54,8 @@ def copy_photos(src: Path, dest: Path) -> dict:
         if clear:
             rgb, _ = composite(img, WHITE)
             iio.imwrite(dest / f"{file.stem}.png", to_uint8(rgb))
+            if masks is not None:
+                iio.imwrite(masks / f"{file.stem}.png", to_uint8(img[..., 3]))
         else:
             shutil.copyfile(file, dest / file.name)
     names = [p.name for p in image_files(dest)]

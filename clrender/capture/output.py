@@ -91,12 +91,20 @@ def format_report(report: dict) -> str:
              f"({report['models']} model{'s' if report['models'] != 1 else ''}, "
              f"{report['left_out']} left out), {report['points3D']} 3D points, mean "
              f"reprojection error {report['reprojection_error_px']:.3f} px",
-             f"{report['matcher']} matching, {report['threads']} threads, scene "
+             f"{report['matcher']} matching, {report.get('mapper', 'incremental')} mapping, "
+             f"{report['threads']} threads, scene "
              f"{report['scene']}"]
     camera = report.get("camera")
     if camera:      # a focal length far from the photos' field of view flags a bad model
         lines.append(f"camera {camera['model']} {camera['width']}x{camera['height']}, "
                      f"parameters {', '.join(f'{p:.4g}' for p in camera['params'])}")
+    refuted = report.get("refuted") or {"rounds": [], "left_out": []}
+    for i, check in enumerate(refuted["rounds"]):
+        lines.append(f"mapping {i + 1}: {len(check['cameras'])} cameras see the object's "
+                     f"points outside its silhouettes ({', '.join(check['cameras'])}); "
+                     f"{check['pairs_removed']} image pairs that placed them removed")
+    if refuted["left_out"]:
+        lines.append(f"left out, still refuted: {', '.join(refuted['left_out'])}")
     for name, t in report["stages"].items():
         seconds = "-" if t["seconds"] is None else f"{t['seconds']:.1f} s"
         lines.append(f"  {name:13s} {seconds}{' (done before, skipped)' if t['skipped'] else ''}")

@@ -4,10 +4,13 @@ Stages, each recorded in a work folder ``<out>.work/`` by a ``<stage>.json`` wri
 (its outputs are renamed into place first), so an interrupted capture resumes at the first
 stage without one; ``force`` starts over:
 
-    frames        photos checked / video frames picked       -> frames/
+    frames        photos checked / video frames picked       -> frames/, masks/
     features      SIFT, one shared camera                    -> features.db
     matching      exhaustive (photos) or sequential (video)  -> matches.db
     mapping       incremental mapping, largest model kept    -> sparse/<k>/
+                  object photos: cameras checked against the    (mapping.db: pairs
+                  silhouettes, mapped again without the pairs    removed)
+                  that placed a refuted one (:mod:`.silhouette`)
     undistortion  PINHOLE images of the registered frames    -> undistorted/
     output        <out>/: images/, images_N/, sparse/0/, capture.json, clrender.json
 
@@ -25,7 +28,7 @@ from contextlib import closing
 from pathlib import Path
 
 from ..atomic import atomic_folder, write_atomic
-from . import sfm
+from . import sfm, silhouette
 from .frames import MIN_FRAMES, copy_photos
 from .output import write_output
 from .video import VIDEO_SUFFIXES, extract_frames
@@ -33,11 +36,12 @@ from .video import VIDEO_SUFFIXES, extract_frames
 STAGES = ("frames", "features", "matching", "mapping", "undistortion", "output")
 EXHAUSTIVE_MAX = 300     # photos beyond this are matched sequentially (pairs grow as N^2)
 REPORT = "capture.json"
+MAX_REMAPS = 2           # mappings after the first, each without the pairs of refuted cameras
 
 
 def capture(src, out, max_frames: int = 200, matcher: str = "auto", bounded=None,
             downscale: int | None = None, force: bool = False, threads: int | None = None,
-            seed: int = 0) -> dict:
+            seed: int = 0, mapper: str = "incremental") -> dict:
     """Run structure from motion on ``src`` and write a COLMAP dataset to ``out``.
 
     Args:
@@ -50,6 +54,8 @@ def capture(src, out, max_frames: int = 200, matcher: str = "auto", bounded=None
             unbounded; None: bounded when every photo has transparent pixels.
         downscale: also write ``images_{downscale}/``.
         threads: CPU threads for every stage (default: all of the machine's).
+        mapper: "incremental" or "global" (:func:`.sfm.reconstruct`); a work folder mapped
+            with the other redoes mapping and the stages after it.
     Returns:
         the report written to ``out/capture.json``.
     """
@@ -84,12 +90,20 @@ def capture(src, out, max_frames: int = 200, matcher: str = "auto", bounded=None
         work / "matches.db", work / "features.db",
         lambda db: {"pairs": sfm.match(db, sequential, threads),
                     "matcher": "sequential" if sequential else "exhaustive"}))
-    mapped = run.stage("mapping", lambda: _mapping(work, threads, seed, info["given"]))
+    masks = work / "masks" if info.get("transparent") else None
+    if (work / "mapping.json").is_file() and run.info("mapping").get(
+            "mapper", "incremental") != mapper:
+        for stage in ("mapping", "undistortion"):
+            (work / f"{stage}.json").unlink(missing_ok=True)
+        shutil.rmtree(work / "undistorted", ignore_errors=True)
+    mapped = run.stage("mapping", lambda: _mapping(work, threads, seed, info["given"], masks,
+                                                   mapper))
     run.stage("undistortion", lambda: _undistortion(work, mapped["chosen"], threads))
     is_bounded = info["transparent"] if bounded is None else bool(bounded)
     report = {"given": info["given"], "source": info["source"], "threads": threads,
               **{k: mapped[k] for k in ("registered", "reprojection_error_px", "points3D",
                                         "models", "left_out")},
+              "refuted": mapped.get("refuted"), "mapper": mapped.get("mapper", "incremental"),
               "camera": mapped.get("camera"),
               "scene": "bounded" if is_bounded else "unbounded",
               "matcher": run.info("matching")["matcher"], "downscale": downscale}
@@ -137,11 +151,18 @@ def check_settings(work: Path, settings: dict) -> None:
 
 
 def _frames(src: Path, work: Path, is_video: bool, max_frames: int) -> dict:
+    """``frames/``; for photos also ``masks/``, the alpha of those with transparent pixels
+    (the silhouettes :mod:`.silhouette` checks an object capture's cameras against)."""
     result = {}
+    for folder in ("frames", "masks"):          # left by an interrupted stage
+        shutil.rmtree(work / folder, ignore_errors=True)
 
     def write(tmp: Path) -> None:
-        result.update(extract_frames(src, tmp, max_frames) if is_video
-                      else copy_photos(src, tmp))
+        if is_video:
+            result.update(extract_frames(src, tmp, max_frames))
+        else:
+            atomic_folder(work / "masks",
+                          lambda masks: result.update(copy_photos(src, tmp, masks)))
 
     atomic_folder(work / "frames", write)
     return result
@@ -166,32 +187,71 @@ def _database(db: Path, start: Path | None, fill) -> dict:
     return info or {}
 
 
-def _mapping(work: Path, threads: int, seed: int, given: int) -> dict:
-    """Map ``matches.db`` into ``sparse/``; the largest model is chosen."""
+def _mapping(work: Path, threads: int, seed: int, given: int, masks: Path | None,
+             mapper: str) -> dict:
+    """Map ``mapping.db`` (``matches.db`` with the shared camera's focal length taken for
+    a prior: :func:`.sfm.set_focal_prior`) into ``sparse/``; the largest model is chosen.
+    With ``masks`` (an object capture), its cameras are checked against the silhouettes:
+    while some are refuted, the pairs that placed them are removed from ``mapping.db`` and
+    mapping starts over, at most MAX_REMAPS times; cameras still refuted then are
+    deregistered (left out rather than wrong)."""
+    db, rounds, dropped = work / "mapping.db", [], []
+    _database(db, work / "matches.db", sfm.set_focal_prior)
+    while True:
+        found, chosen = _map(work, db, threads, seed, given, mapper)
+        bad = silhouette.refuted(found[chosen], masks) if masks else {}
+        if not bad:
+            break
+        removed = (silhouette.prune_pairs(db, found[chosen], bad)
+                   if len(rounds) < MAX_REMAPS else [])
+        rounds.append({"cameras": {n: round(v, 3) for n, v in sorted(bad.items())},
+                       "pairs_removed": len(removed)})
+        if not removed:
+            dropped = sorted(bad)
+            _deregister(found[chosen], bad, work / "sparse" / str(chosen))
+            break
+    models = {k: sfm.model_summary(r) for k, r in found.items()}
+    left_out = given - models[chosen]["registered"]
+    if len(models) > 1:
+        print(f"clrender capture: warning: {len(models)} disconnected models; kept the "
+              f"largest ({models[chosen]['registered']} of {given} images), {left_out} images "
+              "left out", file=sys.stderr)
+    if dropped:
+        print(f"clrender capture: warning: {len(dropped)} cameras see the object's points "
+              f"outside its silhouettes after {len(rounds) - 1} new mappings, left out: "
+              f"{', '.join(dropped)}", file=sys.stderr)
+    return {**models[chosen], "chosen": str(chosen), "models": len(models),
+            "left_out": left_out, "refuted": {"rounds": rounds, "left_out": dropped},
+            "mapper": mapper}
+
+
+def _map(work: Path, db: Path, threads: int, seed: int, given: int,
+         mapper: str) -> tuple[dict, int]:
+    """({k: Reconstruction} mapped from ``db`` into ``sparse/<k>/``, the largest's k)."""
     found = {}
 
     def write(tmp: Path) -> None:
-        found.update(sfm.reconstruct(work / "matches.db", work / "frames", tmp, threads, seed))
+        found.update(sfm.reconstruct(db, work / "frames", tmp, threads, seed, mapper))
 
     if (work / "sparse").exists():
         shutil.rmtree(work / "sparse")
     atomic_folder(work / "sparse", write)
-    models = {k: sfm.model_summary(r) for k, r in found.items()}
-    best = max((m["registered"] for m in models.values()), default=0)
+    best = max((r.num_reg_images() for r in found.values()), default=0)
     if best < MIN_FRAMES:
         shutil.rmtree(work / "sparse")
         raise ValueError(f"{work / 'frames'}: structure from motion registered "
                          f"{'none' if best == 0 else f'only {best}'} of the {given} images "
                          f"(at least {MIN_FRAMES} needed; too few matching features: little "
                          "texture, little overlap between views, or unrelated photos)")
-    chosen = max(models, key=lambda k: models[k]["registered"])
-    left_out = given - models[chosen]["registered"]
-    if len(models) > 1:
-        print(f"clrender capture: warning: {len(models)} disconnected models; kept the "
-              f"largest ({models[chosen]['registered']} of {given} images), {left_out} images "
-              "left out", file=sys.stderr)
-    return {**models[chosen], "chosen": str(chosen), "models": len(models),
-            "left_out": left_out}
+    return found, max(found, key=lambda k: found[k].num_reg_images())
+
+
+def _deregister(rec, names, folder: Path) -> None:
+    """Deregister the images ``names`` of ``rec`` and write it over ``folder``."""
+    for image in list(rec.images.values()):
+        if image.name in names:
+            rec.deregister_frame(image.frame_id)
+    rec.write(str(folder))
 
 
 def _undistortion(work: Path, chosen: str, threads: int) -> dict:

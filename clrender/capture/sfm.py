@@ -84,10 +84,40 @@ def _images(db: Path):
         database.close()
 
 
-def reconstruct(db: Path, images: Path, out: Path, threads: int, seed: int = 0) -> dict:
-    """Incremental mapping of ``db`` into ``out/<k>/`` (one folder per model found).
-    Returns {k: Reconstruction}."""
+def set_focal_prior(db: Path) -> None:
+    """Mark the focal length of every camera of ``db`` as a prior (COLMAP's guess from the
+    image size, 1.2 times its larger side, when the photos carry no EXIF focal length).
+
+    Without a prior, the mapper estimates the focal length anew with each image it
+    registers (P4Pf, from that image's matches alone) and a weak registration can drag the
+    shared camera to a wrong model; with one, registration is calibrated (P3P) and the
+    focal length is refined by bundle adjustment over all images only."""
+    database = pycolmap.Database.open(db)
+    try:
+        for camera in database.read_all_cameras():
+            camera.has_prior_focal_length = True
+            database.update_camera(camera)
+    finally:
+        database.close()
+
+
+def reconstruct(db: Path, images: Path, out: Path, threads: int, seed: int = 0,
+                mapper: str = "incremental") -> dict:
+    """Mapping of ``db`` into ``out/<k>/`` (one folder per model found), incremental
+    (COLMAP's: one image registered at a time) or global (GLOMAP's: rotation averaging,
+    then global positioning, then bundle adjustment). Returns {k: Reconstruction}."""
     pycolmap.set_random_seed(seed)
+    if mapper == "global":
+        options = pycolmap.GlobalPipelineOptions(num_threads=threads, random_seed=seed,
+                                                 min_model_size=MIN_MODEL_SIZE)
+        options.mapper.global_positioning.use_gpu = False      # the CPU wheel: no CUDA
+        options.mapper.bundle_adjustment.ceres.use_gpu = False
+        with tqdm(total=1, desc="mapping (global)", unit="model", disable=None) as bar:
+            found = pycolmap.global_mapping(db, images, out, options)
+            bar.update()
+        return found
+    if mapper != "incremental":
+        raise ValueError(f"mapper {mapper!r}: expected 'incremental' or 'global'")
     options = pycolmap.IncrementalPipelineOptions(num_threads=threads, random_seed=seed,
                                                   min_model_size=MIN_MODEL_SIZE)
     n = len(_images(db))
