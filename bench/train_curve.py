@@ -6,7 +6,7 @@
     python -m bench.train_curve --preset cpu-long --option L=4 --option variant=separate-v,sum
     python -m bench.train_curve --preset cpu --scene data/lego --downscale 4 --test-stride 2
 
-Trains the baseline row of the method's ``CURVE_TABLE`` (NGP-RT: Table 2's separate-v,
+Trains the baseline row of the method's ``curve_table`` (NGP-RT: Table 2's separate-v,
 L = 2; NDRF: the full model of its Table 3) from scratch into a fresh run folder
 ``CACHE/curves/<key>/run`` and, at about 12 steps of the run (the first and the last
 included), bakes the in-memory training state (the plug-in's step hook) and renders every
@@ -59,11 +59,11 @@ COLUMNS = ("method", "preset", "option", "seed", "step", "train_seconds", "eval_
 
 
 def baseline_row(method: str):
-    """The curve's row: the baseline row of the method's ``CURVE_TABLE`` (its first row
+    """The curve's row: the baseline row of the method's ``curve_table`` (its first row
     where it has no baseline)."""
-    table_key = methods.get(method).CURVE_TABLE
+    table_key = methods.bench_of(method).curve_table
     if table_key is None:
-        raise ValueError(f"method {method!r} declares no CURVE_TABLE for {KEY}")
+        raise ValueError(f"method {method!r} declares no curve_table for {KEY}")
     table = ablation.load_table(table_key)
     base = table.rows[0].baseline or table.rows[0].name
     return next(r for r in table.rows if r.name == base)
@@ -123,13 +123,13 @@ class Evaluator:
 def option_values(method: str, text: str) -> tuple[str, list]:
     """``NAME=V1,V2,..`` (``--option``) as the name of one of ``method``'s training options
     and its values, each converted to the option's type and checked; ValueError otherwise."""
-    plugin = methods.get(method)
+    declared = methods.get(method).train_options
     name, sep, values = text.partition("=")
-    opt = plugin.TRAIN_OPTIONS.get(name)
+    opt = declared.get(name)
     if not sep or opt is None or not values or opt.nargs:
         raise ValueError(f"--option {text!r}: expected NAME=V1[,V2..] with NAME one of "
                          f"{method}'s training options of one value: "
-                         f"{', '.join(k for k, o in plugin.TRAIN_OPTIONS.items() if not o.nargs)}")
+                         f"{', '.join(k for k, o in declared.items() if not o.nargs)}")
     convert = (lambda v: v.lower() in ("1", "true", "yes")) if opt.type is bool else opt.type
     out = []
     for v in values.split(","):
@@ -208,18 +208,18 @@ def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: i
     from clrender.runs import read_log
 
     method = method or methods.default()
-    plugin, row = methods.get(method), baseline_row(method)
+    plugin, bench, row = methods.get(method), methods.bench_of(method), baseline_row(method)
     options = {**row.model, **(option or {})}
-    teacher_option = plugin.TEACHER and plugin.TEACHER.option
-    n_iter, log_every = plugin.train_steps(preset, iterations)
+    teacher_option = bench.teacher and bench.teacher.option
+    n_iter, log_every = bench.train_steps(preset, iterations)
     steps = eval_steps(n_iter, log_every, n_points)
-    spec = {"method": method, **plugin.model_spec(preset, **{k: v for k, v in options.items()
-                                                             if k != teacher_option}),
+    spec = {"method": method, **bench.model_spec(preset, **{k: v for k, v in options.items()
+                                                            if k != teacher_option}),
             "code": code_fingerprint(method), "iterations": n_iter, "data": fingerprint,
             "seed": seed, "steps": steps, "test_stride": test_stride}
     test_set, teacher_psnr = test_views(data, downscale, test_stride), None
     if teacher_option in options:
-        teacher = cache.ensure_model(root, data, fingerprint, preset, plugin.TEACHER.method,
+        teacher = cache.ensure_model(root, data, fingerprint, preset, bench.teacher.method,
                                      options[teacher_option], seed=seed,
                                      torch_device=torch_device, downscale=downscale)
         teacher_psnr = evaluate(teacher.baked, test_set, device=device)["mean"]["psnr"]
@@ -344,7 +344,7 @@ def run(args, meta: dict) -> str:
     ``args.out``, the files rewritten after each curve; returns the text table (with the
     options' comparison, :func:`compare_options`)."""
     row = baseline_row(args.method)
-    scene = args.scene or ablation.load_table(methods.get(args.method).CURVE_TABLE).scene
+    scene = args.scene or ablation.load_table(methods.bench_of(args.method).curve_table).scene
     data = cache.resolve_scene(scene, args.cache)
     fingerprint = cache.data_fingerprint(data, args.downscale)
     curves = curve_options(args.method, args.option)

@@ -8,6 +8,7 @@ import os
 import sys
 
 from . import cliopts, methods
+from .contract import check_options
 from .paths import PATHS
 
 
@@ -82,22 +83,23 @@ def _model_downscale(args) -> int:
 
 
 def _cmd_train(args) -> int:
-    plugin = methods.get(args.method)
-    preset = args.preset or plugin.DEFAULT_PRESET
-    if preset not in plugin.PRESETS:
+    spec = methods.get(args.method)
+    preset = args.preset or spec.default_preset
+    if preset not in spec.presets:
         raise ValueError(f"--preset {preset!r}: method {args.method!r} has presets "
-                         f"{', '.join(plugin.PRESETS)}")
-    run = plugin.train(args.data, args.out, preset, seed=args.seed, iterations=args.iterations,
-                       torch_device=args.torch_device, downscale=args.downscale,
-                       **cliopts.chosen(args, "train", args.method))
+                         f"{', '.join(spec.presets)}")
+    options = cliopts.chosen(args, "train", args.method)
+    check_options(options, spec.train_options, "training options", args.method)
+    run = spec.train(args.data, args.out, preset, seed=args.seed, iterations=args.iterations,
+                     torch_device=args.torch_device, downscale=args.downscale, **options)
     print(f"trained {args.method} run in {run}")
     return 0
 
 
 def _cmd_bake(args) -> int:
-    plugin = methods.of_run(args.run)
-    path = plugin.bake_run(args.run, args.out,
-                           **cliopts.chosen(args, "bake", methods.name_of(plugin)))
+    spec = methods.of_run(args.run)
+    path = spec.bake_run(args.run, args.out,
+                         **cliopts.chosen(args, "bake", methods.name_of(spec)))
     print(f"wrote {path}")
     return 0
 
@@ -106,8 +108,8 @@ def _render_options(args) -> dict:
     """The render options given for the model's method (another method's is an error)."""
     from . import bakedfile
 
-    plugin = methods.for_format(bakedfile.peek_format(args.model), args.model)
-    return cliopts.chosen(args, "render", methods.name_of(plugin))
+    spec = methods.for_format(bakedfile.peek_format(args.model), args.model)
+    return cliopts.chosen(args, "render", methods.name_of(spec))
 
 
 def _cmd_render(args) -> int:
@@ -207,7 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", default=methods.default(), choices=methods.names())
     s.add_argument("--out", required=True, help="run folder (checkpoints, config, log)")
     s.add_argument("--preset", default=None, choices=methods.all_presets(),
-                   help="the method's preset (default: its DEFAULT_PRESET)")
+                   help="the method's preset (default: its default_preset)")
     s.add_argument("--iterations", type=int, default=None, help="override the preset's count")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--torch-device", default=None, help="torch device (default cuda if present)")
@@ -266,7 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_cmd_export)
 
     for name in methods.names():
-        methods.get(name).add_commands(sub)
+        if methods.get(name).add_commands is not None:
+            methods.get(name).add_commands(sub)
     return p
 
 

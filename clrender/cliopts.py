@@ -1,9 +1,9 @@
-"""Methods' declared options (:class:`clrender.methods.Option`) on the command line: one
+"""Methods' declared options (:class:`clrender.contract.Option`) on the command line: one
 argument group per method, and back from the parsed flags to the chosen method's keyword
 options, refusing the options of other methods.
 
 Examples:
-    >>> add_groups(train_parser, "train")          # every method's TRAIN_OPTIONS
+    >>> add_groups(train_parser, "train")          # every method's train_options
     >>> options = chosen(args, "train", "ndrf")    # {"teacher": "model.npz"} as given
 """
 from __future__ import annotations
@@ -11,19 +11,19 @@ from __future__ import annotations
 import argparse
 
 from . import methods
+from .contract import MethodSpec, Option
 
 KINDS = {"train": "training", "render": "render", "bake": "bake"}
 # Whose options a group holds, for its title and for refusing another method's flag.
 OWNERS = {"train": "--method {}", "render": "a model of method {}", "bake": "a run of method {}"}
 
 
-def _declared(plugin, kind: str) -> dict:
-    if kind == "bake":
-        return methods.declared(plugin, "BAKE_OPTIONS")
-    return plugin.TRAIN_OPTIONS if kind == "train" else plugin.Renderer.RENDER_OPTIONS
+def _declared(spec: MethodSpec, kind: str) -> dict:
+    return {"train": spec.train_options, "bake": spec.bake_options,
+            "render": spec.renderer.RENDER_OPTIONS}[kind]
 
 
-def _argument(name: str, opt: methods.Option) -> dict:
+def _argument(name: str, opt: Option) -> dict:
     """argparse keywords of an option; an absent flag parses as None (not given)."""
     if opt.type is bool:
         # The help says what the flag does: a --no-X flag turns the option off.
@@ -37,10 +37,11 @@ def _argument(name: str, opt: methods.Option) -> dict:
 
 
 def add_groups(parser: argparse.ArgumentParser, kind: str) -> None:
-    """Add every method's ``kind`` options ("train": ``TRAIN_OPTIONS``, "render": the
-    Renderer's ``RENDER_OPTIONS``, "bake": ``BAKE_OPTIONS``) to ``parser``, one argument group per method. Methods
-    declaring the same flag share it when its argparse form is the same; otherwise the
-    later method's flag is prefixed with its name (``--<method>-<option>``)."""
+    """Add every method's ``kind`` options ("train": ``train_options``, "render": its
+    renderer's ``RENDER_OPTIONS``, "bake": ``bake_options``) to ``parser``, one argument
+    group per method. Methods declaring the same flag share it when its argparse form is
+    the same; otherwise the later method's flag is prefixed with its name
+    (``--<method>-<option>``)."""
     flags: dict[str, dict] = {}          # flag -> {method: option name}
     forms: dict[str, dict] = {}
     for name in methods.names():

@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 
 from . import methods
+from .contract import check_options
 
 
 class Renderer:
@@ -18,7 +19,8 @@ class Renderer:
     Args:
         model: a loaded model (``clrender.load``) or the path of a baked file.
         device: OpenCL device spec (see :mod:`clrender.device`); default ``$CLRENDER_DEVICE``.
-        **options: the method's render options (NGP-RT: ``use_G``), see ``RENDER_OPTIONS``.
+        **options: the method's render options (NGP-RT: ``use_G``): its renderer's
+            ``RENDER_OPTIONS``.
     """
 
     def __init__(self, model, device=None, **options):
@@ -26,14 +28,9 @@ class Renderer:
             model = methods.load(model)
         self.model = model
         self.method = methods.of_model(model)
-        allowed = self.method.Renderer.RENDER_OPTIONS
-        unknown = sorted(set(options) - set(allowed))
-        if unknown:
-            raise ValueError(f"render options {unknown} do not apply to method "
-                             f"{model.method!r}; it takes {sorted(allowed) or 'none'}")
-        for name, value in options.items():
-            allowed[name].check(name, value)
-        self.impl = self.method.Renderer(model, device=device, **options)
+        check_options(options, self.method.renderer.RENDER_OPTIONS, "render options",
+                      model.method)
+        self.impl = self.method.renderer(model, device=device, **options)
 
     @property
     def device_name(self) -> str:
@@ -41,7 +38,7 @@ class Renderer:
 
     @property
     def scalar_stats(self) -> dict:
-        """{table column: :class:`clrender.methods.Stat`} this method reports (NGP-RT:
+        """{table column: :class:`clrender.contract.Stat`} this method reports (NGP-RT:
         Marching, the mean of ``n_march``)."""
         return dict(self.impl.SCALAR_STATS)
 

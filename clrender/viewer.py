@@ -98,7 +98,7 @@ class OptionSpec:
 
 def option_specs(renderer_cls) -> list[OptionSpec]:
     """The render options a method's renderer class declares in ``RENDER_OPTIONS``
-    (:class:`clrender.methods.Option`, as the method contract requires)."""
+    (:class:`clrender.contract.Option`, as the method contract requires)."""
     return [OptionSpec(name, opt.type, opt.default, opt.choices, opt.help)
             for name, opt in renderer_cls.RENDER_OPTIONS.items()]
 
@@ -257,7 +257,7 @@ class Viewer:
         for handle in (self._max_size, self._preview):
             handle.on_update(lambda _event: self._refresh_all())
         self._options = []
-        for spec in option_specs(methods.of_model(self.model).Renderer):
+        for spec in option_specs(methods.of_model(self.model).renderer):
             handle, convert = _add_control(gui, spec)
             handle.on_update(lambda _event: self._rebuild())
             self._options.append((spec.name, handle, convert))

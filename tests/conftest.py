@@ -20,6 +20,19 @@ def install_toy(site: Path) -> None:
     (dist / "entry_points.txt").write_text("[clrender.methods]\ntoy = toymethod.method\n")
 
 
+def replace_bench(monkeypatch, method: str, **changes) -> None:
+    """For the test, method ``method``'s spec with its bench spec's fields ``changes``
+    (``ablations=tmp_path``): specs are frozen, so the registry hands out a changed copy."""
+    import dataclasses
+
+    from clrender import methods
+
+    real = methods.get
+    spec = real(method)
+    changed = dataclasses.replace(spec, bench=dataclasses.replace(spec.bench, **changes))
+    monkeypatch.setattr(methods, "get", lambda name: changed if name == method else real(name))
+
+
 def pytest_configure(config):
     if os.environ.get("CLRENDER_TEST_WITH_TOY") == "1":
         site = Path(tempfile.mkdtemp(prefix="clrender-toy-site-"))

@@ -6,6 +6,7 @@ import pytest
 
 from bench.modelcache import cache, fingerprint
 from clrender import methods
+from conftest import replace_bench
 
 PY = '''"""A module."""
 import math
@@ -25,10 +26,9 @@ CL_CHANGED = CL.replace("0.5f", "0.25f")
 
 @pytest.fixture
 def sources(tmp_path, monkeypatch):
-    """NGP-RT with ``SOURCES`` replaced by a Python file and a kernel folder of tmp_path."""
+    """NGP-RT with its ``sources`` replaced by a Python file and a kernel folder of tmp_path."""
     (tmp_path / "kernels").mkdir()
-    monkeypatch.setattr(methods.get("ngprt"), "SOURCES",
-                        (tmp_path / "train.py", tmp_path / "kernels"))
+    replace_bench(monkeypatch, "ngprt", sources=(tmp_path / "train.py", tmp_path / "kernels"))
     fingerprint.code_fingerprint.cache_clear()
     yield tmp_path
     fingerprint.code_fingerprint.cache_clear()
@@ -56,12 +56,12 @@ def test_a_missing_source_is_named(sources):
 
 
 def test_every_method_fingerprints_the_files_it_declares():
-    for name in methods.names():
-        files = fingerprint._files(methods.declared(methods.get(name), "SOURCES"))
+    for bench in methods.benched().values():
+        files = fingerprint._files(bench.sources)
         assert all(path.is_file() for _, path in files)
     shell = {n for n, _ in fingerprint._files(fingerprint.SHELL_SOURCES)}
-    ngprt = {n for n, _ in fingerprint._files(methods.get("ngprt").SOURCES)}
-    ndrf = {n for n, _ in fingerprint._files(methods.get("ndrf").SOURCES)}
+    ngprt = {n for n, _ in fingerprint._files(methods.bench_of("ngprt").sources)}
+    ndrf = {n for n, _ in fingerprint._files(methods.bench_of("ndrf").sources)}
     assert {"data/load.py", "clrender/runs.py", "clrender/camera.py"} <= shell
     assert {"ngprt/train.py", "ngprt/torch_ops.py", "ngprt/fused_grid.cpp"} <= ngprt
     assert {"ndrf/train.py", "ndrf/distill.py", "ngprt/render_cl.py"} <= ndrf

@@ -10,7 +10,7 @@ import pytest
 
 from bench.tables import ablation
 from bench.tables.measure import compare_images, speedup_interval, time_pairs
-from clrender import methods
+from conftest import replace_bench
 
 
 def test_interval_is_t_over_the_pairs_log_ratios():
@@ -67,7 +67,7 @@ def test_images_are_compared_bit_for_bit():
 
 
 def test_paired_sizes_must_be_frame_sizes(tmp_path, monkeypatch):
-    monkeypatch.setattr(methods.get("ngprt"), "ABLATIONS", tmp_path)
+    replace_bench(monkeypatch, "ngprt", ablations=tmp_path)
     (tmp_path / "bad.toml").write_text(
         'title = "t"\npaper_source = "p"\nscene = "builtin-bounded"\npreset = "cpu"\n'
         'paper_columns = ["PSNR"]\npaired_sizes = ["1920"]\n[[rows]]\nname = "a"\n'

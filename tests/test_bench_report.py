@@ -8,6 +8,7 @@ import pytest
 from bench.tables import ablation, compare, report, seeds, summary
 from bench.tables.result import RowResult
 from clrender import methods
+from conftest import replace_bench
 
 
 @pytest.mark.parametrize("key", ["table2", "table3", "table4"])
@@ -31,11 +32,11 @@ def test_table4_rows_are_the_marches_against_the_papers_without_G():
     assert all(not r.paper for r in t.rows if r.render["march"] == "ours")
 
 
-@pytest.mark.parametrize("preset", methods.get("ndrf").PRESETS)
+@pytest.mark.parametrize("preset", methods.get("ndrf").presets)
 def test_ndrf_table3_single_surface_is_the_full_models_outer_one(preset):
     """At every preset the single-surface row changes the surface count alone."""
     t = ablation.load_table("ndrf-table3")
-    spec = {r.name: methods.get("ndrf").model_spec(
+    spec = {r.name: methods.bench_of("ndrf").model_spec(
         preset, **{k: v for k, v in r.model.items() if k != "teacher"}) for r in t.rows}
     full, single = spec["Full (duplex + conv + distill)"], spec["Single surface (outer)"]
     assert t.rows[-1].model == {"teacher": t.rows[0].model["teacher"]}   # the preset's own
@@ -182,7 +183,7 @@ def _table(folder, name, columns='["PSNR"]', baseline="", model="{ variant = \"s
 
 
 def test_unknown_baseline_and_column_are_errors(tmp_path, monkeypatch):
-    monkeypatch.setattr(methods.get("ngprt"), "ABLATIONS", tmp_path)
+    replace_bench(monkeypatch, "ngprt", ablations=tmp_path)
     _table(tmp_path, "bad", baseline='baseline = "nope"')
     with pytest.raises(ValueError, match="unknown baseline 'nope'"):
         ablation.load_table("bad")
@@ -204,7 +205,7 @@ def test_unknown_baseline_and_column_are_errors(tmp_path, monkeypatch):
     ('"b"', "takes a list of tables"),
 ])
 def test_bad_comparisons_are_errors_naming_the_file(tmp_path, monkeypatch, compare, error):
-    monkeypatch.setattr(methods.get("ngprt"), "ABLATIONS", tmp_path)
+    replace_bench(monkeypatch, "ngprt", ablations=tmp_path)
     (tmp_path / "bad.toml").write_text(
         'title = "t"\npaper_source = "p"\nscene = "builtin-bounded"\npreset = "cpu"\n'
         'paper_columns = ["PSNR"]\nbaseline = "b"\n'
@@ -215,7 +216,7 @@ def test_bad_comparisons_are_errors_naming_the_file(tmp_path, monkeypatch, compa
 
 
 def test_declared_comparisons_replace_those_of_the_baseline(tmp_path, monkeypatch):
-    monkeypatch.setattr(methods.get("ngprt"), "ABLATIONS", tmp_path)
+    replace_bench(monkeypatch, "ngprt", ablations=tmp_path)
     rows = "".join(f'[[rows]]\nname = "{n}"\nmodel = {{ L = 2 }}\n' for n in "abc")
     head = ('title = "t"\npaper_source = "p"\nscene = "builtin-bounded"\npreset = "cpu"\n'
             'paper_columns = ["PSNR"]\nbaseline = "a"\n')
@@ -228,7 +229,7 @@ def test_declared_comparisons_replace_those_of_the_baseline(tmp_path, monkeypatc
 
 def test_tables_are_keyed_by_method_and_name(tmp_path, monkeypatch):
     """Two methods' `table4`: each asked for as method/name, their files apart."""
-    monkeypatch.setattr(methods.get("ndrf"), "ABLATIONS", tmp_path)
+    replace_bench(monkeypatch, "ndrf", ablations=tmp_path)
     _table(tmp_path, "table4", model="{ kernel_size = 1, teacher = { L = 2 } }")
     keys = ablation.list_tables()
     assert "ndrf/table4" in keys and "ngprt/table4" in keys and "table4" not in keys

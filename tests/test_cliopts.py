@@ -9,11 +9,12 @@ from types import SimpleNamespace
 import pytest
 
 from clrender import cliopts, methods
-from clrender.methods import Option
+from clrender.contract import Option
 
 
 def _plugin(train: dict, render: dict):
-    return SimpleNamespace(TRAIN_OPTIONS=train, Renderer=SimpleNamespace(RENDER_OPTIONS=render))
+    return SimpleNamespace(train_options=train, bake_options={},
+                           renderer=SimpleNamespace(RENDER_OPTIONS=render))
 
 
 @pytest.fixture

@@ -197,8 +197,7 @@ def test_first_step_loss_and_gradients_agree_across_engines(tmp_path):
     results = []
     for name in ("torch", "fast"):
         torch.manual_seed(0)
-        model = NGPRT(cfg)
-        model.engine = engines.get(name, torch.device("cpu"))
+        model = NGPRT(cfg, engines.get(name, torch.device("cpu")))
         o, d, target, bg = sampler.sample(256, torch.Generator().manual_seed(1))
         occ = torch.ones((cfg.L_C,) * 3, dtype=torch.bool)
         r = render_rays(model, o, d, occ, 1.0, bg)

@@ -7,7 +7,9 @@ import itertools
 import json
 import subprocess
 import sys
-from types import SimpleNamespace
+from dataclasses import replace
+from importlib import metadata
+from types import ModuleType, SimpleNamespace
 
 import imageio.v3 as iio
 import numpy as np
@@ -16,6 +18,7 @@ import pytest
 import clrender
 from clrender import cli, methods
 from clrender.bakedfile import BakedFormatError
+from clrender.contract import BenchSpec, MethodSpec, PluginError, Teacher
 from clrender.data import load_dataset, make_scene
 from clrender.evaluate import evaluate
 from clrender.metrics import psnr
@@ -58,91 +61,106 @@ def test_this_packages_methods_are_registered_with_a_default():
 
 @pytest.mark.parametrize("name", methods.names())
 def test_method_meets_the_contract(name):
-    """The conformance test: every hook and declaration of clrender.methods.Method, each
-    declared option's default valid, each statistic and the preset default consistent."""
-    plugin = methods.get(name)
-    assert methods.check(plugin) == []
-    assert methods.for_format(plugin.FORMAT) is plugin and methods.name_of(plugin) == name
-    for opt_name, opt in {**plugin.TRAIN_OPTIONS, **plugin.Renderer.RENDER_OPTIONS}.items():
+    """The conformance test: a registered method is a MethodSpec (checked when made: hooks
+    and their signatures), each declared option's default valid, each statistic and its
+    bench spec consistent."""
+    spec = methods.get(name)
+    assert isinstance(spec, MethodSpec)
+    assert methods.for_format(spec.format) is spec and methods.name_of(spec) == name
+    for opt_name, opt in {**spec.train_options, **spec.bake_options,
+                          **spec.renderer.RENDER_OPTIONS}.items():
         if opt.default is not None:
             opt.check(opt_name, opt.default)
         assert opt.help and opt.cli_flag(opt_name).startswith("--")
-    assert all(s.fmt.format(0.5) for s in plugin.Renderer.SCALAR_STATS.values())
-    assert plugin.TEACHER is None or plugin.TEACHER.method in methods.names()
-    assert plugin.CONTRACT == methods.CONTRACT
-    assert plugin.ABLATIONS is None or plugin.ABLATIONS.is_dir()
-    n, log_every = plugin.train_steps(plugin.DEFAULT_PRESET)
-    assert n >= 1 and log_every >= 1
+    assert all(s.fmt.format(0.5) for s in spec.renderer.SCALAR_STATS.values())
+    if spec.bench is not None:
+        bench = spec.bench
+        assert bench.teacher is None or bench.teacher.method in methods.names()
+        assert bench.ablations is None or bench.ablations.is_dir()
+        n, log_every = bench.train_steps(spec.default_preset)
+        assert n >= 1 and log_every >= 1
+        assert bench.train_steps(spec.default_preset, 7) == (7, log_every)
 
 
-def test_registry_formats_presets_and_clear_errors(tmp_path):
-    formats = [methods.get(n).FORMAT for n in methods.names()]
+def test_registry_formats_presets_and_clear_errors(monkeypatch):
+    formats = [methods.get(n).format for n in methods.names()]
     assert len(set(formats)) == len(formats)
-    presets = {p for n in methods.names() for p in methods.get(n).PRESETS}
+    presets = {p for n in methods.names() for p in methods.get(n).presets}
     assert set(methods.all_presets()) == presets
     with pytest.raises(ValueError, match=r"unknown method 'gsplat'; methods: "
                                          + ", ".join(methods.names())):
         methods.get("gsplat")
-    problems = methods.check(SimpleNamespace(FORMAT="x", PRESETS=["a"], TEACHER=None))
-    assert problems[:4] == ["CONTRACT is missing", "PRESETS should be tuple, is list",
-                            "DEFAULT_PRESET is missing", "TRAIN_OPTIONS is missing"]
-    assert "train is not callable" in problems and "Renderer is missing" in problems
-    assert not any(p.startswith(("FORMAT", "TEACHER")) for p in problems)
+    ngprt = methods.get("ngprt")
+    with pytest.raises(PluginError, match=r"^MethodSpec: presets should be tuple, is list; "
+                                          r"load_baked is not callable$"):
+        replace(ngprt, presets=["cpu"], load_baked=None)
+    with pytest.raises(PluginError) as err:
+        replace(ngprt, default_preset="huge", train_options={**ngprt.train_options, "x": 1})
+    assert str(err.value).startswith("MethodSpec: default_preset 'huge' not in presets; "
+                                     "train_options['x'] is not Option; train(")
+    with pytest.raises(PluginError, match=r"^BenchSpec: ablations should be Path or NoneType, "
+                                          r"is str; model_spec is not callable$"):
+        BenchSpec(None, lambda preset: (1, 1), ablations="tables")
+    # An entry point may name the spec itself (module:METHOD) as well as its module.
+    real = methods._entry_points()
+    spec_ep = metadata.EntryPoint("direct", "clrender.ngprt.method:METHOD", methods.GROUP)
+    monkeypatch.setattr(methods, "_entry_points", lambda: {**real, "direct": spec_ep})
+    assert methods.get("direct") is ngprt
 
 
-def _plugin_like(base, **changes):
-    """A copy of plug-in module ``base``'s declarations and hooks with ``changes``."""
-    plugin = SimpleNamespace(**{k: getattr(base, k) for k in dir(base) if not k.startswith("__")})
-    for k, v in changes.items():
-        setattr(plugin, k, v)
-    return plugin
-
-
-def test_hook_signatures_and_the_contract_version_are_checked():
+def test_hook_signatures_are_checked():
     ngprt = methods.get("ngprt")
 
     def train(data, out, preset, *, seed=0, iterations=None, torch_device=None, progress=True,
-              on_step=None, variant="separate-v", L=2):           # no downscale
+              on_step=None, variant="separate-v", L=2, engine="fast"):      # no downscale
         raise AssertionError("never called")
 
-    problems = methods.check(_plugin_like(ngprt, train=train))
-    assert len(problems) == 1 and problems[0].startswith("train(data, out, preset, *, seed=0")
-    assert "cannot be called as train(data, out, preset, seed=, " in problems[0]
-    assert "unexpected keyword argument 'downscale'" in problems[0]
+    with pytest.raises(PluginError) as err:
+        replace(ngprt, train=train)
+    problem = str(err.value)
+    assert problem.startswith("MethodSpec: train(data, out, preset, *, seed=0") and \
+        "; " not in problem
+    assert "cannot be called as train(data, out, preset, seed=, " in problem
+    assert "unexpected keyword argument 'downscale'" in problem
 
-    class Renderer(ngprt.Renderer):
+    class Renderer(ngprt.renderer):
         def __init__(self, model, device=None):               # no use_G
             raise AssertionError("never called")
 
         def render(self, camera):                             # no background, stats
             raise AssertionError("never called")
 
-    problems = methods.check(_plugin_like(ngprt, CONTRACT=0, bake_run=lambda run_dir: None))
-    assert problems[0] == (f"CONTRACT is 0; this clrender's method contract is version "
-                           f"{methods.CONTRACT}")
-    assert problems[1].startswith("bake_run(run_dir) cannot be called as bake_run(run_dir, "
-                                  "out_path)") and len(problems) == 2
-    problems = methods.check(_plugin_like(ngprt, Renderer=Renderer))
-    assert len(problems) == 2
-    assert problems[0].startswith("Renderer(model, device=None) cannot be called as "
-                                  "Renderer(model, device=, use_G=, march=)")
-    assert problems[1].startswith("Renderer.render(self, camera) cannot be called")
-    assert methods.check(_plugin_like(ngprt, train=lambda data, out, preset, **kw: None)) == []
-    teacher = methods.Teacher("mentor", "ngprt")
-    assert methods.check(_plugin_like(methods.get("ndrf"), TEACHER=teacher)) == [
-        "TEACHER.option 'mentor' is not in TRAIN_OPTIONS"]
+    with pytest.raises(PluginError, match=r"^MethodSpec: bake_run\(run_dir\) cannot be called "
+                                          r"as bake_run\(run_dir, out_path, G_metric=, grids=\)"):
+        replace(ngprt, bake_run=lambda run_dir: None)
+    with pytest.raises(PluginError) as err:
+        replace(ngprt, renderer=Renderer)
+    first, second = str(err.value).split("; ")
+    assert first.startswith("MethodSpec: renderer(model, device=None) cannot be called as "
+                            "renderer(model, device=, use_G=, march=)")
+    assert second.startswith("renderer.render(self, camera) cannot be called")
+    assert replace(ngprt, train=lambda data, out, preset, **kw: None).train is not ngprt.train
+    ndrf = methods.get("ndrf")
+    with pytest.raises(PluginError, match=r"^MethodSpec: bench.teacher.option 'mentor' is not "
+                                          r"in train_options$"):
+        replace(ndrf, bench=replace(ndrf.bench, teacher=Teacher("mentor", "ngprt")))
 
 
-def test_a_plugin_that_breaks_the_contract_is_one_line_from_the_cli(monkeypatch, capsys):
-    broken = _plugin_like(methods.get("ngprt"), CONTRACT=methods.CONTRACT + 1)
+@pytest.mark.parametrize("load, error", [
+    (lambda: replace(methods.get("ngprt"), default_preset="huge"),
+     "method 'broken' (broken.method) does not meet the method contract "
+     "(clrender.contract.MethodSpec): MethodSpec: default_preset 'huge' not in presets"),
+    (lambda: ModuleType("broken.method"),       # a module of names, no METHOD
+     "method 'broken' (broken.method) is a module, expected a clrender.contract.MethodSpec "
+     "or a module whose METHOD is one")])
+def test_a_plugin_that_breaks_the_contract_is_one_line_from_the_cli(monkeypatch, capsys, load,
+                                                                   error):
     real = methods._entry_points()
-    ep = SimpleNamespace(name="broken", value="broken.method", load=lambda: broken)
+    ep = SimpleNamespace(name="broken", value="broken.method", load=load)
     monkeypatch.setattr(methods, "_entry_points", lambda: {**real, "broken": ep})
     assert cli.main(["info"]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith(
-        "clrender: error: method 'broken' (broken.method) does not meet the method contract")
-    assert "CONTRACT is 2; this clrender's method contract is version 1" in err
+    assert err == f"clrender: error: {error}"
 
 
 def test_load_stamps_the_method_and_checks_the_scene(models):
@@ -169,10 +187,18 @@ def test_info_and_rendering_do_not_import_embree(models, command):
     assert proc.returncode == 0, proc.stderr[-2000:]
 
 
-def test_old_run_folders_without_a_method_are_ngprt(tmp_path):
-    """config.json written before runs named their method: NGP-RT's (LEGACY_RUNS)."""
+def test_a_run_whose_config_lacks_its_method_says_what_to_add(tmp_path, capsys):
+    """config.json written before runs named their method (NGP-RT's, then): the error names
+    the key to add and the methods it may name."""
     (tmp_path / "config.json").write_text(json.dumps({"model": {}, "preset": "cpu"}))
-    assert methods.of_run(tmp_path) is methods.get("ngprt")
+    message = (f'{tmp_path / "config.json"}: no "method"; a run\'s config names the method '
+               f'that trained it: add "method": "NAME" to it, NAME one of '
+               f'{", ".join(methods.names())}')
+    with pytest.raises(ValueError) as err:
+        methods.of_run(tmp_path)
+    assert str(err.value) == message
+    assert cli.main(["bake", str(tmp_path), "--out", str(tmp_path / "m.npz")]) == 2
+    assert capsys.readouterr().err.strip() == f"clrender bake: error: {message}"
     (tmp_path / "config.json").write_text(json.dumps({"method": "ndrf"}))
     assert methods.of_run(tmp_path) is methods.get("ndrf")
 

@@ -10,6 +10,7 @@ correctly rounded sqrt), so images and hit maps are compared exactly.
 from __future__ import annotations
 
 import csv
+import importlib
 import json
 from pathlib import Path
 
@@ -21,6 +22,7 @@ from bench import run as bench_run
 from conftest import install_toy
 from clrender import cli, methods
 from clrender.camera import generate_rays
+from clrender.contract import MethodSpec
 from clrender.data import load_dataset, make_scene
 from clrender.evaluate import evaluate
 from clrender.paths import path_cameras
@@ -30,13 +32,17 @@ TESTS = Path(__file__).resolve().parent
 
 @pytest.fixture(scope="module")
 def toy(tmp_path_factory):
-    """The toy plug-in, registered like an installed package (dist-info entry point)."""
+    """The toy plug-in module, registered like an installed package (dist-info entry point
+    naming the module, whose METHOD the registry hands out)."""
     site = tmp_path_factory.mktemp("site")
     install_toy(site)
     with pytest.MonkeyPatch.context() as mp:
         mp.syspath_prepend(str(TESTS))
         mp.syspath_prepend(str(site))
-        yield methods.get("toy")
+        spec = methods.get("toy")
+        plugin = importlib.import_module("toymethod.method")
+        assert spec is plugin.METHOD
+        yield plugin
 
 
 @pytest.fixture(scope="module")
@@ -58,8 +64,9 @@ def baked(toy, scene, tmp_path_factory):
 
 
 def test_the_toy_meets_the_contract_and_is_listed(toy):
-    assert "toy" in methods.names() and methods.check(toy) == []
-    assert methods.for_format("clrender-toy") is toy and methods.name_of(toy) == "toy"
+    assert "toy" in methods.names() and isinstance(toy.METHOD, MethodSpec)
+    assert methods.for_format("clrender-toy") is toy.METHOD
+    assert methods.name_of(toy.METHOD) == "toy"
 
 
 def test_load_renderer_render_match_the_reference(toy, baked, capsys):

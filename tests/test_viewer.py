@@ -86,14 +86,14 @@ def test_camera_to_viser_inverts_viser_to_camera():
 
 
 def test_option_specs_are_the_declared_options():
-    ngprt = methods.get("ngprt").Renderer
+    ngprt = methods.get("ngprt").renderer
     use_g, march = ngprt.RENDER_OPTIONS["use_G"], ngprt.RENDER_OPTIONS["march"]
     assert viewer.option_specs(ngprt) == [
         viewer.OptionSpec("use_G", bool, True, None, use_g.help),
         viewer.OptionSpec("march", str, "ours", march.choices, march.help)]
-    hits = methods.get("ndrf").Renderer.RENDER_OPTIONS["hits"]
+    hits = methods.get("ndrf").renderer.RENDER_OPTIONS["hits"]
     assert viewer.OptionSpec("hits", str, hits.default, hits.choices, hits.help) in \
-        viewer.option_specs(methods.get("ndrf").Renderer)
+        viewer.option_specs(methods.get("ndrf").renderer)
 
 
 def test_first_camera_gets_the_orbits_horizontal_fov_and_thumbnails_are_small(tmp_path):
@@ -189,7 +189,7 @@ def test_ndrf_model_gets_its_declared_option_controls():
     model = random_ndrf_model(NDRFConfig(thresholds=(1e-4, 1e-2)), seed=0)
     v = viewer.Viewer(model, port=0)
     try:
-        declared = [s.name for s in viewer.option_specs(methods.of_model(model).Renderer)]
+        declared = [s.name for s in viewer.option_specs(methods.of_model(model).renderer)]
         assert [name for name, _, _ in v._options] == declared
         assert v.renderer.method is methods.get("ndrf")
     finally:

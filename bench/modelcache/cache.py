@@ -154,23 +154,23 @@ def plan_model(root: Path, data: Path, fingerprint: str, preset: str, method: st
     """The :class:`ModelPlan` of one table row's model (and of its teacher, nested).
 
     Args:
-        method: the row's method; ``options`` its model options. The option its
-            ``TEACHER`` declares (a dict of model options of the teacher's method) names a
-            teacher, planned (and cached) like any model and handed to the training as a
-            baked file.
+        method: the row's method; ``options`` its model options. The option its bench
+            spec's ``teacher`` declares (a dict of model options of the teacher's method)
+            names a teacher, planned (and cached) like any model and handed to the
+            training as a baked file.
         fingerprint, downscale: :func:`data_fingerprint` of ``data`` read at ``downscale``.
     """
-    plugin = methods.get(method)
-    if preset not in plugin.PRESETS:
+    presets, bench = methods.get(method).presets, methods.bench_of(method)
+    if preset not in presets:
         raise ValueError(f"preset {preset!r}: method {method!r} has presets "
-                         f"{', '.join(plugin.PRESETS)}")
+                         f"{', '.join(presets)}")
     options = dict(options)
     teacher = None
-    if plugin.TEACHER is not None and plugin.TEACHER.option in options:
-        teacher = plan_model(root, data, fingerprint, preset, plugin.TEACHER.method,
-                             options.pop(plugin.TEACHER.option), seed=seed,
+    if bench.teacher is not None and bench.teacher.option in options:
+        teacher = plan_model(root, data, fingerprint, preset, bench.teacher.method,
+                             options.pop(bench.teacher.option), seed=seed,
                              downscale=downscale)
-    spec = {**plugin.model_spec(preset, **options), "code": code_fingerprint(method),
+    spec = {**bench.model_spec(preset, **options), "code": code_fingerprint(method),
             "data": fingerprint, "seed": seed}
     if teacher is not None:
         spec["teacher"] = teacher.key
@@ -215,7 +215,7 @@ def train_into(plan: ModelPlan, folder: Path, teacher_baked: Path | None,
 
     plugin, options = methods.get(plan.method), dict(plan.options)
     if plan.teacher is not None:
-        options[plugin.TEACHER.option] = str(teacher_baked)
+        options[plugin.bench.teacher.option] = str(teacher_baked)
     resumed = (folder / "run" / "checkpoint.pt").is_file()
     start = time.perf_counter()
     plugin.train(str(plan.data), folder / "run", plan.preset, seed=plan.seed,
@@ -246,10 +246,10 @@ def commit(plan: ModelPlan, files: dict[str, bytes], record: dict) -> None:
 
 
 def ensure_baked(entry: ModelEntry, method: str, options: dict) -> ModelEntry:
-    """``entry`` with its run baked with ``options`` (the method's ``BAKE_OPTIONS``) into
+    """``entry`` with its run baked with ``options`` (the method's ``bake_options``) into
     ``model-<name=value,...>.npz`` beside its ``model.npz`` (once, under the model's lock);
     ``entry`` itself where every option has its default (what ``model.npz`` holds)."""
-    declared = methods.declared(methods.get(method), "BAKE_OPTIONS")
+    declared = methods.get(method).bake_options
     options = {k: v for k, v in options.items() if v != declared[k].default}
     if not options:
         return entry

@@ -1,6 +1,6 @@
 """Which code trained a model: a hash of the normalised text of a method's training sources
-(its ``SOURCES``), so the model cache serves a model only to the code that would train it
-again (bench/modelcache/cache.py).
+(its bench spec's ``sources``), so the model cache serves a model only to the code that
+would train it again (bench/modelcache/cache.py).
 
 Normalised: Python by its syntax tree without docstrings (comments, blank lines, line breaks
 and docstrings do not count), OpenCL C with its comments removed and runs of white space as
@@ -8,7 +8,7 @@ one; any other file by its bytes. A comment edit keeps every key; any change to 
 makes new ones.
 
 Examples:
-    >>> code_fingerprint("ngprt")        # 16 hex digits: its SOURCES and torch's version
+    >>> code_fingerprint("ngprt")        # 16 hex digits: its sources and torch's version
 """
 from __future__ import annotations
 
@@ -68,12 +68,11 @@ def source_fingerprint(sources) -> str:
 
 @functools.lru_cache(maxsize=None)
 def code_fingerprint(method: str) -> str:
-    """The fingerprint of what trains a model of ``method``: its declared ``SOURCES``, the
+    """The fingerprint of what trains a model of ``method``: its declared ``sources``, the
     shell's :data:`SHELL_SOURCES` and the torch version (cached per process: the sources do
     not change under a run)."""
     import torch
 
-    plugin = methods.get(method)
-    sources = (*methods.declared(plugin, "SOURCES"), *SHELL_SOURCES)
+    sources = (*methods.bench_of(method).sources, *SHELL_SOURCES)
     return hashlib.sha256(f"{source_fingerprint(sources)} torch={torch.__version__}"
                           .encode()).hexdigest()[:16]

@@ -12,7 +12,7 @@ from pathlib import Path
 from clrender import methods
 
 # Distributions whose versions can change any trained model or its measurement (each method
-# adds its own, its LIBRARIES).
+# adds its own, its bench spec's libraries).
 LIBRARIES = ("clrender", "torch", "numpy", "scipy", "pyopencl", "ray")
 
 
@@ -33,7 +33,7 @@ def versions() -> dict[str, str]:
     """{distribution: version} of :data:`LIBRARIES` and every method's that are installed,
     plus Python's."""
     found = {"python": platform.python_version()}
-    extra = [lib for n in methods.names() for lib in methods.declared(methods.get(n), "LIBRARIES")]
+    extra = [lib for bench in methods.benched().values() for lib in bench.libraries]
     for name in dict.fromkeys([*LIBRARIES, *extra]):
         try:
             found[name] = metadata.version(name)

@@ -4,8 +4,8 @@ bake, render one small view; the time and peak resident memory of every phase.
     python -m bench.speed.paper_smoke --data /work/data/lego200 --out results/
 
 What it catches is what a GPU user's first `paper` run would die on (a shape, an
-allocation, an hour of set-up), at CPU cost. Each method that declares ``PAPER_SMOKE``
-(:class:`clrender.methods.PaperSmoke`) runs its own steps; model sizes, optimiser and batch
+allocation, an hour of set-up), at CPU cost. Each method that declares a ``paper_smoke``
+(:class:`clrender.contract.PaperSmoke`) runs its own steps; model sizes, optimiser and batch
 budget are its `paper` preset's, and only the amounts of work that scale with the number of
 cells or views and not with the model are cut, by its declared options (flags here), the
 cuts written into the result. NGP-RT's (clrender/ngprt/paper_smoke.py):
@@ -75,9 +75,9 @@ def _render(baked: str) -> dict:
 
 
 def smoked() -> dict:
-    """{method: its :class:`clrender.methods.PaperSmoke`} of the methods declaring one."""
-    found = {n: methods.declared(methods.get(n), "PAPER_SMOKE") for n in methods.names()}
-    return {n: s for n, s in found.items() if s is not None}
+    """{method: its :class:`clrender.contract.PaperSmoke`} of the methods declaring one."""
+    return {n: bench.paper_smoke for n, bench in methods.benched().items()
+            if bench.paper_smoke is not None}
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -56,8 +56,7 @@ class _Trainer:
     def __init__(self, name, cfg, tcfg, sampler, seed):
         torch.manual_seed(seed)
         self.name, self.tcfg, self.sampler = name, tcfg, sampler
-        self.model = NGPRT(cfg)
-        self.model.engine = engines.get(name, torch.device("cpu"))
+        self.model = NGPRT(cfg, engines.get(name, torch.device("cpu")))
         self.opt = make_optimizer(self.model, tcfg)
         self.occ, self.gamma, self.n_rays = OccupancyGrid(cfg, "cpu"), tcfg.gamma_init, 1024
         self.steps: list[dict] = []

@@ -72,7 +72,7 @@ def row_stats(renderer, base_images: list, test_set) -> dict:
 def measure(model_path: Path, test_set, old_kernels: Path | None, views: int, repeats: int,
             sizes, device=None) -> list[dict]:
     """Every row's statistics and pairs against the march without G (of ``model_path``)."""
-    Renderer = methods.get("ngprt").Renderer
+    Renderer = methods.get("ngprt").renderer
     model = methods.load(model_path)
     rows = [("paper w/o G", model, {"use_G": False}),
             ("w/ G, cut at jumps (box)", model, {}),

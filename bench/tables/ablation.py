@@ -1,11 +1,12 @@
-"""Ablation table specs: the TOML files of each method's ``ABLATIONS`` folder (shipped
+"""Ablation table specs: the TOML files of each method's ``ablations`` folder (shipped
 with its plug-in: ``clrender/ngprt/ablations/table4.toml``) loaded into dataclasses.
 
 Tables are keyed by (method, name), ``name`` the file's stem; a name two methods use is
 asked for as ``method/name``. A table names its method (rows may override it); each row
-names ``model`` options (what is trained, checked by the row's method's
-``check_model_options``: NGP-RT ``variant``, ``L``; NDRF ``thresholds``, ``teacher``, ...)
-and ``render`` options (its Renderer's ``RENDER_OPTIONS``: NGP-RT ``use_G``).
+names ``model`` options (what is trained: the row's method's ``train_options``, NGP-RT
+``variant``, ``L``; NDRF ``thresholds``, ``teacher`` (a table of the teacher's), ...),
+``render`` options (its renderer's ``RENDER_OPTIONS``: NGP-RT ``use_G``) and ``bake``
+options (its ``bake_options``), each checked by :func:`clrender.contract.check_options`.
 
 A row's ``baseline`` (or the table's) is the row its speed-up is measured against. The
 paper's claims are the table's comparisons, each a row against another (PSNR difference
@@ -29,6 +30,7 @@ else:  # pragma: no cover
 
 from bench.tables import columns
 from clrender import methods
+from clrender.contract import check_options
 
 
 @dataclass(frozen=True)
@@ -41,7 +43,7 @@ class Row:
     render: dict
     paper: dict = field(default_factory=dict)
     baseline: str | None = None     # name of the row this row's speed-up is measured against
-    bake: dict = field(default_factory=dict)    # the method's BAKE_OPTIONS for this row
+    bake: dict = field(default_factory=dict)    # the method's bake_options for this row
     same_image: bool | None = None  # must render its baseline's image (None: the table's)
 
 
@@ -62,7 +64,7 @@ class Comparison:
 
 @dataclass(frozen=True)
 class Table:
-    """A paper table to reproduce (one TOML file of a method's ``ABLATIONS`` folder)."""
+    """A paper table to reproduce (one TOML file of a method's ``ablations`` folder)."""
 
     key: str                        # a name, or method/name (list_tables)
     method: str
@@ -103,10 +105,10 @@ def file_stem(key: str) -> str:
 
 
 def _paths() -> dict[tuple[str, str], Path]:
-    """{(method, name): TOML path} over every registered method's ABLATIONS folder."""
+    """{(method, name): TOML path} over every registered method's ablations folder."""
     found: dict[tuple[str, str], Path] = {}
-    for method in methods.names():
-        folder = methods.get(method).ABLATIONS
+    for method, bench in methods.benched().items():
+        folder = bench.ablations
         for path in sorted(folder.glob("*.toml")) if folder is not None else ():
             found[(method, path.stem)] = path
     return found
@@ -131,6 +133,22 @@ def list_tables() -> list[str]:
     return sorted(_keys(_paths()).values())
 
 
+def check_model_options(method: str, options: dict) -> None:
+    """Raise ValueError unless ``options`` are model options of ``method`` (its
+    ``train_options``), the option its bench spec's ``teacher`` names a table of the
+    teacher's model options (checked the same way)."""
+    spec = methods.get(method)
+    teacher = spec.bench and spec.bench.teacher
+    own = dict(options)
+    nested = own.pop(teacher.option, None) if teacher else None
+    check_options(own, spec.train_options, "model options", method)
+    if nested is not None:
+        if not isinstance(nested, dict):
+            raise ValueError(f"model option {teacher.option!r} takes a table of "
+                             f"{teacher.method} model options, got {nested!r}")
+        check_model_options(teacher.method, nested)
+
+
 def _row(spec: dict, i: int, r: dict, path: Path) -> Row:
     if not isinstance(r.get("name"), str):
         raise ValueError(f"{path}: row {i} has no name")
@@ -138,24 +156,13 @@ def _row(spec: dict, i: int, r: dict, path: Path) -> Row:
     if method not in methods.names():
         raise ValueError(f"{path}: row {i} names method {method!r}; methods: {methods.names()}")
     plugin = methods.get(method)
-    model, render = dict(r.get("model", {})), dict(r.get("render", {}))
+    model, render, bake = (dict(r.get(kind, {})) for kind in ("model", "render", "bake"))
     try:
-        plugin.check_model_options(model)
-    except (TypeError, ValueError) as exc:
+        check_model_options(method, model)
+        check_options(render, plugin.renderer.RENDER_OPTIONS, "render options", method)
+        check_options(bake, plugin.bake_options, "bake options", method)
+    except ValueError as exc:
         raise ValueError(f"{path}: row {i} ({r.get('name')!r}): {exc}") from exc
-    bake = dict(r.get("bake", {}))
-    for kind, given, allowed in (
-            ("render", render, plugin.Renderer.RENDER_OPTIONS),
-            ("bake", bake, methods.declared(plugin, "BAKE_OPTIONS"))):
-        unknown = sorted(set(given) - set(allowed))
-        if unknown:
-            raise ValueError(f"{path}: row {i}: {kind} options {unknown} are not among "
-                             f"{sorted(allowed)} of method {method!r}")
-        try:
-            for name, value in given.items():
-                allowed[name].check(name, value)
-        except ValueError as exc:
-            raise ValueError(f"{path}: row {i} ({r.get('name')!r}): {exc}") from exc
     unknown = set(r.get("paper", {})) - set(spec["paper_columns"])
     if unknown:
         raise ValueError(f"{path}: row {i} has paper figures for unknown columns {sorted(unknown)}")
@@ -244,22 +251,17 @@ def load_table(key: str) -> Table:
 
 
 def with_bake(table: Table, options: dict) -> Table:
-    """``table`` with bake ``options`` (``{name: value}`` of its methods' ``BAKE_OPTIONS``)
-    on every row, over the table's and the rows' own, under the key ``KEY-name-value``
-    (so its results files stand beside the table's); ``table`` itself without options."""
+    """``table`` with bake ``options`` (``{name: value}`` of its methods' ``bake_options``)
+    on every row, over the rows' own, under the key ``KEY-name-value`` (so its results
+    files stand beside the table's); ``table`` itself without options."""
     if not options:
         return table
-    rows = []
-    for row in table.rows:
-        allowed = methods.declared(methods.get(row.method), "BAKE_OPTIONS")
-        for name, value in options.items():
-            if name not in allowed:
-                raise ValueError(f"{table.key}: bake option {name!r} is not among "
-                                 f"{sorted(allowed)} of method {row.method!r}")
-            allowed[name].check(name, value)
-        rows.append(replace(row, bake={**row.bake, **options}))
+    for method in {row.method for row in table.rows}:
+        check_options(options, methods.get(method).bake_options, f"{table.key}: bake options",
+                      method)
+    rows = tuple(replace(row, bake={**row.bake, **options}) for row in table.rows)
     suffix = "-".join(f"{k}-{options[k]}" for k in sorted(options))
-    return replace(table, key=f"{table.key}-{suffix}", rows=tuple(rows),
+    return replace(table, key=f"{table.key}-{suffix}", rows=rows,
                    title=f"{table.title} ({', '.join(f'{k}={v}' for k, v in options.items())})")
 
 

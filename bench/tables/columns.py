@@ -23,10 +23,10 @@ STAGE = re.compile(r"^(?P<stage>\w+) \(ms\)$")
 
 
 def stats_of(method_names) -> dict:
-    """{column: :class:`clrender.methods.Stat`} the methods declare, first declaration kept."""
+    """{column: :class:`clrender.contract.Stat`} the methods declare, first declaration kept."""
     out = {}
     for name in dict.fromkeys(method_names):
-        for col, stat in methods.get(name).Renderer.SCALAR_STATS.items():
+        for col, stat in methods.get(name).renderer.SCALAR_STATS.items():
             out.setdefault(col, stat)
     return out
 

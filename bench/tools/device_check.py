@@ -50,13 +50,13 @@ def _camera(width: int, height: int):
 
 def checked_methods() -> list[str]:
     """The registered methods with an ``example_model``."""
-    return [n for n in methods.names() if methods.declared(methods.get(n), "example_model")]
+    return [n for n, bench in methods.benched().items() if bench.example_model is not None]
 
 
 def make_models(folder: Path) -> dict:
     """Every checked method's example model baked into ``folder``: {method: path}."""
     folder.mkdir(parents=True, exist_ok=True)
-    return {name: methods.get(name).example_model(folder / f"{name}.npz")
+    return {name: methods.bench_of(name).example_model(folder / f"{name}.npz")
             for name in checked_methods()}
 
 

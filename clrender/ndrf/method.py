@@ -1,6 +1,6 @@
-"""NDRF plugged into the clrender shell (meets :class:`clrender.methods.Method`), including
-its own commands: ``clrender ndrf extract`` (duplex meshes from an NGP-RT teacher) and
-``clrender ndrf init`` (an untrained model on extracted meshes).
+"""NDRF plugged into the clrender shell: its :class:`clrender.contract.MethodSpec`,
+``METHOD``, including its own commands: ``clrender ndrf extract`` (duplex meshes from an
+NGP-RT teacher) and ``clrender ndrf init`` (an untrained model on extracted meshes).
 
 Rendering needs numpy and pyopencl (embreex for the Embree hit path, imported when it casts):
 training and extraction are imported when called.
@@ -11,12 +11,11 @@ import json
 from importlib import resources
 from pathlib import Path
 
-from ..methods import CONTRACT, Option, PaperSmoke, Teacher
+from ..contract import BenchSpec, MethodSpec, Option, PaperSmoke, Teacher, preset_steps
 from .baked import FORMAT, load_baked
 from .config import PRESETS as _PRESETS
 from .render import Renderer
 
-CONTRACT = CONTRACT         # written for this version of the method contract
 PRESETS = tuple(_PRESETS)
 DEFAULT_PRESET = "cpu"
 TRAIN_OPTIONS = {
@@ -43,17 +42,14 @@ SOURCES = (Path(__file__).resolve().parent,
                                               "space.py", "marches.py")),
            Path(str(resources.files("clrender.kernels"))), _PACKAGE / "device.py")
 
-__all__ = ["CONTRACT", "FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "TEACHER",
-           "ABLATIONS", "CURVE_TABLE", "LIBRARIES", "SOURCES", "PAPER_SMOKE", "Renderer",
-           "load_baked", "train", "train_steps", "bake_run", "check_model_options",
-           "model_spec", "add_commands", "example_model"]
+__all__ = ["METHOD"]
 
 
 def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
           iterations: int | None = None, torch_device=None, progress: bool = True,
           on_step=None, downscale: int = 1, teacher=None, **options):
     """Train an NDRF run (:func:`clrender.ndrf.train.train`) from the baked NGP-RT
-    ``teacher``; ``on_step(step, bake)`` as :data:`clrender.methods.StepHook`."""
+    ``teacher``; ``on_step(step, bake)`` as :data:`clrender.contract.StepHook`."""
     from .train import train as train_ndrf
 
     if teacher is None:
@@ -64,33 +60,10 @@ def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
                       downscale=downscale, **options)
 
 
-def train_steps(preset: str, iterations: int | None = None) -> tuple[int, int]:
-    from .train import TRAIN_PRESETS
-
-    tcfg = TRAIN_PRESETS[preset]
-    return (tcfg.iterations if iterations is None else int(iterations)), tcfg.log_every
-
-
 def bake_run(run_dir, out_path):
     from .train import bake_run as bake
 
     return bake(run_dir, out_path)
-
-
-def check_model_options(options: dict) -> None:
-    """Raise ValueError unless ``options`` are NDRF model options of a bench row (with
-    ``teacher`` a dict of NGP-RT model options)."""
-    unknown = sorted(set(options) - set(TRAIN_OPTIONS))
-    if unknown:
-        raise ValueError(f"unknown NDRF model options {unknown}; expected "
-                         f"{sorted(TRAIN_OPTIONS)}")
-    for name, value in options.items():
-        if name == "teacher":
-            if not isinstance(value, dict):
-                raise ValueError(f"model option 'teacher' takes a table of NGP-RT model "
-                                 f"options, got {value!r}")
-        else:
-            TRAIN_OPTIONS[name].check(name, value)
 
 
 def model_spec(preset: str, **options) -> dict:
@@ -171,3 +144,13 @@ def add_commands(sub) -> None:
     i.add_argument("--out", required=True)
     i.add_argument("--seed", type=int, default=0)
     i.set_defaults(func=_cmd_init)
+
+
+METHOD = MethodSpec(
+    format=FORMAT, presets=PRESETS, default_preset=DEFAULT_PRESET, renderer=Renderer,
+    load_baked=load_baked, train=train, bake_run=bake_run, train_options=TRAIN_OPTIONS,
+    add_commands=add_commands,
+    bench=BenchSpec(model_spec, preset_steps(f"{__package__}.train"), sources=SOURCES,
+                    libraries=LIBRARIES, teacher=TEACHER, ablations=ABLATIONS,
+                    curve_table=CURVE_TABLE, example_model=example_model,
+                    paper_smoke=PAPER_SMOKE))

@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from ..methods import Option, Stat
+from ..contract import Option, Stat
 from .hits import HitCaster
 from .raster_cl import Rasteriser
 from .shader_cl import Shader

@@ -11,7 +11,7 @@ Both engines train the same model with the same math; ``tests/test_fused.py`` co
 their values and gradients.
 
 Examples:
-    >>> model.engine = get("fast", torch.device("cpu"))
+    >>> model = NGPRT(cfg, engine=get("fast", torch.device("cpu")))
 """
 from __future__ import annotations
 

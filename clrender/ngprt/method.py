@@ -1,4 +1,5 @@
-"""NGP-RT plugged into the clrender shell (meets :class:`clrender.methods.Method`).
+"""NGP-RT plugged into the clrender shell: its :class:`clrender.contract.MethodSpec`,
+``METHOD``.
 
 Rendering needs numpy and pyopencl only: training and baking (torch) are imported when
 called.
@@ -7,19 +8,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..methods import CONTRACT, Option, PaperSmoke, Stat
+from ..contract import BenchSpec, MethodSpec, Option, PaperSmoke, Stat, preset_steps
 from .baked import FORMAT, G_METRICS, load_baked
 from .config import GRIDS, PRESETS as _MODEL_PRESETS, VARIANTS
 from .engine import ENGINES
 from .marches import MARCHES
 from .render_cl import Renderer as _CLRenderer
 
-CONTRACT = CONTRACT         # written for this version of the method contract
 PRESETS = tuple(_MODEL_PRESETS)
 DEFAULT_PRESET = "cpu"
 TRAIN_OPTIONS = {
     "variant": Option(str, "separate-v", "feature aggregation (Table 3)", choices=VARIANTS),
-    "L": Option(int, 2, "fine hash levels L", flag="--levels"),
+    "L": Option(int, 2, "fine hash levels L", flag="--levels", minimum=1),
     "engine": Option(str, "fast", "training engine: fast (fused C++ stages, CPU; elsewhere "
                      "the torch engine) or torch (autograd, the reference)", choices=ENGINES),
 }
@@ -28,14 +28,12 @@ BAKE_OPTIONS = {
                        "voxel's closest point: the march with G takes the samples it takes "
                        "without) or centre (the paper's, from the voxel's centre: longer steps)",
                        choices=G_METRICS, flag="--G-metric"),
-    "grids": Option(str, "preset", "the empty-space grids: preset (the occupancy the model "
-                    "trained with, from L_C) or paper (occupancy 512^3 .. 32^3 and G 256^3, "
-                    "from the trained density)", choices=GRIDS),
+    "grids": Option(str, "preset", "the empty-space grids: preset (occupancy at the model's "
+                    "L_C) or paper (occupancy 512^3 .. 32^3 and G 256^3, culled at 512^3)",
+                    choices=GRIDS),
 }
-TEACHER = None
 ABLATIONS = Path(__file__).resolve().parent / "ablations"
 CURVE_TABLE = "table2"
-LEGACY_RUNS = True          # runs written before config.json named the method are NGP-RT's
 # What trains and bakes a model (bench's cache key, beside the shell's data loaders and
 # run folder): model, torch ops, encoding, space, training (its engines and stage clock),
 # baking and the baked format.
@@ -43,11 +41,7 @@ SOURCES = tuple(Path(__file__).resolve().parent / f for f in (
     "config.py", "model.py", "torch_ops.py", "encoding.py", "space.py", "train.py",
     "engine.py", "fused.py", "fused_grid.cpp", "stages.py", "bake.py", "baked.py"))
 
-__all__ = ["CONTRACT", "FORMAT", "PRESETS", "DEFAULT_PRESET", "TRAIN_OPTIONS", "BAKE_OPTIONS",
-           "TEACHER",
-           "ABLATIONS", "CURVE_TABLE", "LEGACY_RUNS", "SOURCES", "PAPER_SMOKE", "Renderer",
-           "load_baked", "train", "train_steps", "bake_run", "check_model_options",
-           "model_spec", "add_commands", "example_model"]
+__all__ = ["METHOD"]
 
 
 class Renderer(_CLRenderer):
@@ -78,7 +72,7 @@ def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
           on_step=None, downscale: int = 1, variant: str = "separate-v", L: int = 2,
           engine: str = "fast"):
     """Train an NGP-RT run (:func:`clrender.ngprt.train.train`); ``on_step(step, bake)`` as
-    :data:`clrender.methods.StepHook` (``bake()``: the training state baked in memory)."""
+    :data:`clrender.contract.StepHook` (``bake()``: the training state baked in memory)."""
     from .train import train as train_ngprt
 
     return train_ngprt(data, out, preset=preset, variant=variant, L=L, iterations=iterations,
@@ -105,32 +99,11 @@ def _step_hook(data, on_step, downscale: int = 1):
     return lambda step, model, occ, gamma: on_step(step, lambda: bake(model, occ, gamma))
 
 
-def train_steps(preset: str, iterations: int | None = None) -> tuple[int, int]:
-    from .train import TRAIN_PRESETS
-
-    tcfg = TRAIN_PRESETS[preset]
-    return (tcfg.iterations if iterations is None else int(iterations)), tcfg.log_every
-
-
 def bake_run(run_dir, out_path, **options):
     """Bake a run folder; ``options``: :data:`BAKE_OPTIONS`."""
     from .bake import bake_run as bake
 
-    for name, value in options.items():
-        BAKE_OPTIONS[name].check(name, value)
     return bake(run_dir, out_path, **options)
-
-
-def check_model_options(options: dict) -> None:
-    """Raise ValueError unless ``options`` are NGP-RT model options (``variant``, ``L``)."""
-    unknown = sorted(set(options) - set(TRAIN_OPTIONS))
-    if unknown:
-        raise ValueError(f"unknown NGP-RT model options {unknown}; expected variant, L, "
-                         f"engine")
-    for name, value in options.items():
-        TRAIN_OPTIONS[name].check(name, value)
-    if options.get("L", 2) < 1:
-        raise ValueError(f"L must be an integer >= 1, got {options['L']!r}")
 
 
 def model_spec(preset: str, variant: str = "separate-v", L: int = 2,
@@ -144,10 +117,6 @@ def model_spec(preset: str, variant: str = "separate-v", L: int = 2,
 
     return {"model": model_preset(preset, variant=variant, L=L).to_dict(),
             "train": asdict(TRAIN_PRESETS[preset]), "engine": engine}
-
-
-def add_commands(subparsers) -> None:
-    """NGP-RT has no commands of its own."""
 
 
 def example_model(path) -> Path:
@@ -173,3 +142,12 @@ PAPER_SMOKE = PaperSmoke(
                              "memory difference gives the training memory per sample",
                              nargs=2)},
     _paper_smoke)
+
+
+METHOD = MethodSpec(
+    format=FORMAT, presets=PRESETS, default_preset=DEFAULT_PRESET, renderer=Renderer,
+    load_baked=load_baked, train=train, bake_run=bake_run, train_options=TRAIN_OPTIONS,
+    bake_options=BAKE_OPTIONS,
+    bench=BenchSpec(model_spec, preset_steps(f"{__package__}.train"), sources=SOURCES,
+                    ablations=ABLATIONS, curve_table=CURVE_TABLE, example_model=example_model,
+                    paper_smoke=PAPER_SMOKE))

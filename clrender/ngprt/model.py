@@ -80,19 +80,20 @@ class AuxNGP(nn.Module):
 
 class NGPRT(nn.Module):
     """NGP-RT: coarse (auxiliary NGP at L_C corners) + attention-fused fine hash features,
-    deferred shading. ``engine`` (:mod:`clrender.ngprt.engine`, not saved with the model)
-    computes the grid lookups: the torch reference by default.
+    deferred shading. ``engine`` (:mod:`clrender.ngprt.engine`, chosen when the model is
+    made, not saved with it) computes the grid lookups: the torch reference by default.
 
     Examples:
         >>> model = NGPRT(preset("tiny"))
+        >>> fast = NGPRT(preset("tiny"), engine=engines.get("fast", torch.device("cpu")))
         >>> sigma, feat = model.sample(u)            # u: (N, 3) grid coordinates in [0, 1]
         >>> rgb = model.shade(acc, dirs)             # acc: (R, 7), dirs: (R, 3)
     """
 
-    def __init__(self, cfg: ModelConfig):
+    def __init__(self, cfg: ModelConfig, engine: Engine = TORCH):
         super().__init__()
         self.cfg = cfg
-        self.engine = TORCH
+        self.engine = engine
         self.aux = AuxNGP(cfg)
         self.fine_tables = _uniform((cfg.L, cfg.T, FEATURES), 1e-4)
         if cfg.n_inv_attention:

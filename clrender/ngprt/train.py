@@ -272,8 +272,7 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
                           "preset": preset, "seed": seed, "engine": engine.name,
                           "background": [float(v) for v in ds.background]},
                     free=("engine",))
-    model = NGPRT(cfg).to(dev)
-    model.engine = engine
+    model = NGPRT(cfg, engine).to(dev)
     opt = make_optimizer(model, tcfg)
     occ, gamma, start = OccupancyGrid(cfg, dev), tcfg.gamma_init, 0
     state = run.resume(model, opt, dev)

@@ -3,8 +3,9 @@ options), rendered by ``toy.cl`` (one ray per work-item) with :func:`render_refe
 its numpy twin. "Training" moves the colour towards the mean of the training pixels the
 sphere covers, one random view a step; it uses the shell's run folder like the real methods.
 
-Only public clrender APIs are used (methods.Option/Stat, runs, bakedfile, camera, device,
-data): nothing in clrender names this method.
+It declares itself as ``METHOD``, a :class:`clrender.contract.MethodSpec`. Only public
+clrender APIs are used (contract, runs, bakedfile, camera, device, data): nothing in
+clrender names this method.
 """
 from __future__ import annotations
 
@@ -20,18 +21,14 @@ import torch
 from clrender import bakedfile
 from clrender.camera import generate_rays
 from clrender.device import event_ms, get_runtime
-from clrender.methods import CONTRACT, Option, Stat
+from clrender.contract import BenchSpec, MethodSpec, Option, Stat
 from clrender.runs import RunFolder, pick_device
 
-CONTRACT = CONTRACT
 FORMAT, VERSION = "clrender-toy", 1
 PRESETS = ("tiny",)
 DEFAULT_PRESET = "tiny"
 ITERATIONS, LOG_EVERY, CHECKPOINT_EVERY = {"tiny": 20}, 5, 10
 TRAIN_OPTIONS = {"radius": Option(float, 0.6, "sphere radius (scene units)")}
-TEACHER = None
-ABLATIONS = Path(__file__).resolve().parent / "ablations"
-CURVE_TABLE = "toy-table"
 KERNEL = Path(__file__).resolve().parent / "toy.cl"
 F32 = np.float32
 
@@ -128,7 +125,7 @@ def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
     from clrender.runs import training_data
 
     ds, data_path = training_data(data, downscale)
-    n_iter, _ = train_steps(preset, iterations)
+    n_iter, _ = METHOD.bench.train_steps(preset, iterations)
     config = ToyConfig(ds.scene, float(radius))
     run = RunFolder(out, {"method": "toy", "model": {"scene": ds.scene, "radius": radius},
                           "iterations": n_iter, "preset": preset, "seed": seed,
@@ -152,24 +149,12 @@ def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
     return run.dir
 
 
-def train_steps(preset: str, iterations: int | None = None) -> tuple[int, int]:
-    return (ITERATIONS[preset] if iterations is None else int(iterations)), LOG_EVERY
-
-
 def bake_run(run_dir, out_path) -> Path:
     run = Path(run_dir)
     conf = json.loads((run / "config.json").read_text())
     state = torch.load(run / "checkpoint.pt", weights_only=True)
     model = ToyModel(ToyConfig(**conf["model"]), state["colour"].numpy().astype(F32))
     return save_baked(model, out_path)
-
-
-def check_model_options(options: dict) -> None:
-    unknown = sorted(set(options) - set(TRAIN_OPTIONS))
-    if unknown:
-        raise ValueError(f"unknown toy model options {unknown}")
-    for name, value in options.items():
-        TRAIN_OPTIONS[name].check(name, value)
 
 
 def model_spec(preset: str, radius: float = 0.6) -> dict:
@@ -193,3 +178,12 @@ def add_commands(subparsers) -> None:
     c = ss.add_parser("colour", help="print the model's colour")
     c.add_argument("model")
     c.set_defaults(func=_cmd_colour)
+
+
+METHOD = MethodSpec(
+    format=FORMAT, presets=PRESETS, default_preset=DEFAULT_PRESET, renderer=Renderer,
+    load_baked=load_baked, train=train, bake_run=bake_run, train_options=TRAIN_OPTIONS,
+    add_commands=add_commands,
+    bench=BenchSpec(model_spec, lambda preset: (ITERATIONS[preset], LOG_EVERY),
+                    ablations=Path(__file__).resolve().parent / "ablations",
+                    curve_table="toy-table", example_model=example_model))
