@@ -35,7 +35,7 @@ VALID_VALUE = {"L": [1, 3, 30], "L_C": [32, 48, 1024, 2048], "log2_T": [4, 9, 24
                "coarse_block": [1, 2, 16, 32], "near": [0.0, 0.5, 5.0, 1e30],
                "far": [0.06, 2.0, 1e30], "aux_levels": [1, 64], "aux_min_res": [1, 10**6],
                "aux_log2_T": [4, 30], "aux_features": [1], "aux_hidden": [1],
-               "step_res": [1, 64, 512, 10**7]}
+               "step_res": [1, 64, 512, 10**7], "occupancy_res": [16, 32, 48, 64, 2048]}
 GAMMAS = [0, 0.0, -1.0, 1e-9, 1e-30, 5e-324, math.nan, math.inf, -math.inf, 1e300, 10**400,
           "1.0", True, None, [1.0], 1e-3, 0.3, 1e6, 3e38]
 
