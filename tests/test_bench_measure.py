@@ -66,19 +66,18 @@ def test_images_are_compared_bit_for_bit():
     assert not out["identical"] and out["max_diff"] == pytest.approx(2**-20)
 
 
-def test_paired_sizes_must_be_frame_sizes(tmp_path, monkeypatch):
+@pytest.mark.parametrize("sizes,message", [
+    ('paired_sizes = ["1920"]', r"bad.toml: paired_sizes: frame size '1920'"),
+    ('paired_sizes = ["64x48"]\nverdict_size = "1920x1080"',
+     r"verdict_size '1920x1080' is not one of paired_sizes"),
+])
+def test_paired_sizes_must_be_frame_sizes(sizes, message, tmp_path, monkeypatch):
     replace_bench(monkeypatch, "ngprt", ablations=tmp_path)
     (tmp_path / "bad.toml").write_text(
         'title = "t"\npaper_source = "p"\nscene = "builtin-bounded"\npreset = "cpu"\n'
-        'paper_columns = ["PSNR"]\npaired_sizes = ["1920"]\n[[rows]]\nname = "a"\n'
+        f'paper_columns = ["PSNR"]\n{sizes}\n[[rows]]\nname = "a"\n'
         'model = { variant = "sum", L = 2 }\n')
-    with pytest.raises(ValueError, match=r"bad.toml: paired_sizes: frame size '1920'"):
-        ablation.load_table("bad")
-    (tmp_path / "bad.toml").write_text(
-        'title = "t"\npaper_source = "p"\nscene = "builtin-bounded"\npreset = "cpu"\n'
-        'paper_columns = ["PSNR"]\npaired_sizes = ["64x48"]\nverdict_size = "1920x1080"\n'
-        '[[rows]]\nname = "a"\nmodel = { variant = "sum", L = 2 }\n')
-    with pytest.raises(ValueError, match=r"verdict_size '1920x1080' is not one of paired_sizes"):
+    with pytest.raises(ValueError, match=message):
         ablation.load_table("bad")
 
 

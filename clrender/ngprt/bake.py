@@ -167,8 +167,9 @@ def bake_state(model: NGPRT, occupancy: torch.Tensor, gamma: float, dataset,
     occupancy_0, fine = visible_cells(model, occupancy, gamma, dataset, n_rays=n_rays,
                                       resolutions=(model.cfg.L_C, R),
                                       dilation=(1, FINE_DILATION))
-    f = R // model.cfg.L_C
-    fine &= occupancy_0.repeat(f, 0).repeat(f, 1).repeat(f, 2)
+    from .baked import upsampled
+
+    fine &= upsampled(occupancy_0, R // model.cfg.L_C)
     return bake(model, occupancy_0, gamma, G_metric, grids, fine)
 
 

@@ -118,6 +118,14 @@ def build_mip(occupancy_0: np.ndarray) -> list[np.ndarray]:
     return levels
 
 
+def upsampled(grid: np.ndarray, factor: int) -> np.ndarray:
+    """(R, R, R) ``grid`` with each cell repeated ``factor`` times along each axis (the
+    inverse of the pooling: a coarse grid at a finer grid's cells)."""
+    for axis in range(3):
+        grid = np.repeat(grid, factor, axis=axis)
+    return grid
+
+
 def _pool(grid: np.ndarray, res: int) -> np.ndarray:
     f = grid.shape[0] // res
     return grid.reshape(res, f, res, f, res, f).max(axis=(1, 3, 5))

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .baked import BakedModel, build_distance_grid, build_mip, expected_arrays, \
-    sparse_coarse_grid, validate
+    sparse_coarse_grid, upsampled, validate
 from .config import FEATURES, ModelConfig
 
 F32 = np.float32
@@ -121,7 +121,7 @@ def random_baked_model(config: ModelConfig, seed: int = 0, gamma: float = 1.0,
     occupancy_0 = coarse
     if config.occ_res > config.L_C:
         f = config.occ_res // config.L_C
-        inside = coarse.repeat(f, 0).repeat(f, 1).repeat(f, 2)
+        inside = upsampled(coarse, f)
         occupancy_0 = _occupancy(config, shapes, thick, config.occ_res) & inside
     arrays = _weights(config, rng)
     arrays["coarse_block_index"], arrays["coarse_blocks"] = block_index, blocks

@@ -24,6 +24,7 @@ from ..camera import CAM_BYTES
 from ..device import device_type_name, event_ms, get_runtime, padded, work_group_size
 from .config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM, VARIANT_CODES,
                      kernel_constants)
+from .baked import upsampled
 from .encoding import HASH_PRIMES
 from .marches import READ_KINDS, check_march, g_in_codes
 from .render_ref import BOX_MARGIN, CUBE, K_BACKOFF, K_PAST_END, REGION_SCALE
@@ -154,9 +155,9 @@ def exit_codes(model, use_G: bool = True) -> np.ndarray:
         if a.shape != (r, r, r):
             raise ValueError(f"baked model: occupancy_{lev} has shape {a.shape}, "
                              f"expected ({r}, {r}, {r})")
-        code += _upsampled(a == 0, 1 << lev)
+        code += upsampled((a == 0).astype(np.uint16), 1 << lev)
     if use_G and g_in_codes(cfg):
-        G = _upsampled(np.asarray(model.arrays["G"], np.uint16), cfg.occ_res // cfg.G_res)
+        G = upsampled(np.asarray(model.arrays["G"], np.uint16), cfg.occ_res // cfg.G_res)
         exit_res = cfg.occ_res >> np.maximum(code.astype(np.int64) - 1, 0)
         code |= np.where((code > 0) & (exit_res < cfg.G_res), G << CODE_G_SHIFT,
                          0).astype(np.uint16)
@@ -174,14 +175,6 @@ def mip_levels(model) -> np.ndarray:
             raise ValueError(f"baked model: occupancy_{lev} has shape {a.shape}, "
                              f"expected ({r}, {r}, {r})")
     return np.concatenate([a.reshape(-1) for a in levels])
-
-
-def _upsampled(a: np.ndarray, factor: int) -> np.ndarray:
-    """(R, R, R) grid repeated ``factor`` times along each axis, as uint16."""
-    a = np.asarray(a, np.uint16)
-    for axis in range(3):
-        a = np.repeat(a, factor, axis=axis)
-    return a
 
 
 class Renderer:
