@@ -25,8 +25,10 @@ do, ``--test-stride K`` scores every K-th test view (the first included), ``--po
 evaluates after about N steps instead of :data:`N_POINTS` (the first evaluations, of a
 model whose occupancy grid has not pruned empty space yet, are the slowest);
 ``--iterations N`` trains N steps instead of the preset's (curves of equal minutes for
-presets or engines whose steps take different times). Writes
-``OUT/train-curve.{csv,png}``.
+presets or engines whose steps take different times). Each evaluation scores PSNR, SSIM and
+LPIPS-Alex and rewrites ``OUT/train-curve.{csv,png}``, so a long run shows its curve so far;
+``--resume`` continues a run cut short from its last checkpoint (the points measured before
+it kept, in the run folder's ``curve.jsonl``).
 """
 from __future__ import annotations
 
@@ -55,7 +57,8 @@ TITLE = "time-to-quality: test PSNR vs training minutes (the baseline row of a m
 PRESETS = ("cpu", "tiny")           # default --preset
 N_POINTS = 12
 COLUMNS = ("method", "preset", "option", "seed", "step", "train_seconds", "eval_seconds",
-           "test_psnr", "test_ssim", "train_psnr", "teacher_test_psnr")
+           "test_psnr", "test_ssim", "test_lpips", "train_psnr", "teacher_test_psnr")
+POINTS_FILE = "curve.jsonl"         # a run folder's evaluations so far, one JSON line each
 
 
 def baseline_row(method: str):
@@ -84,7 +87,8 @@ def eval_steps(iterations: int, log_every: int, n_points: int = N_POINTS) -> lis
 class Evaluator:
     """The ``on_step(step, bake)`` hook of a method's training: at the chosen steps, bake
     the training state in memory and evaluate it on the test views; the training clock,
-    started when the hook is made (just before training), pauses meanwhile.
+    started when the hook is made (just before training), pauses meanwhile. Each point is
+    appended to ``points_file`` as it is measured, so a run cut short keeps its curve.
 
     Args:
         method: the method trained (stamped on each in-memory model, as a loaded one).
@@ -92,15 +96,23 @@ class Evaluator:
         test_set: the :class:`clrender.data.Dataset` test split.
         render_options: the row's render options (``use_G``).
         device: OpenCL device spec.
+        points_file: a JSON-lines file the points are appended to (None: kept in memory).
+        points, train_seconds: the points and training seconds of an earlier part of the
+            run (a resumed one).
+        on_point: called with :attr:`points` after each evaluation.
     Attributes:
         points: one dict per evaluation: step, train_seconds (training wall time so far),
-            eval_seconds (bake + render), test_psnr, test_ssim (means over test views).
+            eval_seconds (bake + render), test_psnr, test_ssim, test_lpips (means over test
+            views; LPIPS None where it cannot be scored).
     """
 
-    def __init__(self, method: str, steps, test_set, render_options: dict, device=None):
+    def __init__(self, method: str, steps, test_set, render_options: dict, device=None,
+                 points_file=None, points=(), train_seconds: float = 0.0, on_point=None):
         self.method, self.steps, self.test_set = method, set(steps), test_set
         self.render_options, self.device = dict(render_options), device
-        self.points, self.train_seconds, self._resumed = [], 0.0, time.perf_counter()
+        self.points_file, self.points = points_file, list(points)
+        self.train_seconds, self.on_point = train_seconds, on_point
+        self._resumed = time.perf_counter()
 
     def __call__(self, step, bake) -> None:
         if step not in self.steps:
@@ -110,14 +122,44 @@ class Evaluator:
         now = time.perf_counter()
         self.train_seconds += now - self._resumed
         model = methods.stamp(bake(), self.method, f"step {step}'s in-memory model")
-        result = evaluate(model, self.test_set, device=self.device, **self.render_options)
+        result = evaluate(model, self.test_set, device=self.device, lpips=True,
+                          **self.render_options)
         self._resumed = time.perf_counter()
-        self.points.append({"step": step, "train_seconds": self.train_seconds,
-                            "eval_seconds": self._resumed - now,
-                            "test_psnr": result["mean"]["psnr"],
-                            "test_ssim": result["mean"]["ssim"]})
+        point = {"step": step, "train_seconds": self.train_seconds,
+                 "eval_seconds": self._resumed - now, "test_psnr": result["mean"]["psnr"],
+                 "test_ssim": result["mean"]["ssim"], "test_lpips": result["mean"]["lpips"]}
+        self.points.append(point)
+        if self.points_file is not None:
+            with open(self.points_file, "a") as f:
+                f.write(json.dumps(point) + "\n")
+        if self.on_point is not None:
+            self.on_point(self.points)
         tqdm.write(f"step {step}: {self.train_seconds / 60:.2f} min, test PSNR "
                    f"{result['mean']['psnr']:.2f} dB (evaluated in {self._resumed - now:.1f} s)")
+
+
+def resumed_points(run_dir: Path) -> tuple[list[dict], float]:
+    """The points of an interrupted curve run that its checkpoint keeps, and the training
+    seconds to resume the clock at.
+
+    Points measured after the checkpoint's step are dropped (they are measured again).
+    The steps trained between the last point kept and the checkpoint were not timed: they
+    are counted at the mean step time of the points kept. Returns ``([], 0.0)`` where the
+    run has no checkpoint or no point.
+    """
+    import torch
+
+    ckpt, points_path = run_dir / "checkpoint.pt", run_dir / POINTS_FILE
+    if not (ckpt.is_file() and points_path.is_file()):
+        return [], 0.0
+    start = int(torch.load(ckpt, map_location="cpu", weights_only=True)["step"])
+    points = [json.loads(line) for line in points_path.read_text().splitlines() if line]
+    points = [p for p in points if p["step"] < start]
+    if not points:
+        return [], 0.0
+    last = points[-1]
+    per_step = last["train_seconds"] / (last["step"] + 1)
+    return points, last["train_seconds"] + per_step * (start - 1 - last["step"])
 
 
 def option_values(method: str, text: str) -> tuple[str, list]:
@@ -186,7 +228,8 @@ def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: i
                   device=None, torch_device=None, iterations: int | None = None,
                   n_points: int = N_POINTS, progress: bool = True,
                   method: str | None = None, option: dict | None = None,
-                  downscale: int = 1, test_stride: int = 1) -> list[dict]:
+                  downscale: int = 1, test_stride: int = 1, resume: bool = False,
+                  on_point=None) -> list[dict]:
     """Train the baseline row's model of ``method`` from scratch with ``preset`` and
     evaluate it along the way.
 
@@ -199,6 +242,9 @@ def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: i
         option: training options set over the row's (``{"engine": "fast"}``).
         downscale, test_stride: the dataset's scale and the test views' stride
             (:func:`test_views`).
+        resume: continue the run folder's training from its checkpoint, keeping the
+            points measured before it (:func:`resumed_points`), instead of starting afresh.
+        on_point: called with this curve's points so far after each evaluation.
     Returns:
         one dict per evaluation, :data:`COLUMNS`; ``train_psnr`` is the training batch's
         PSNR logged at that step; ``teacher_test_psnr`` the teacher's (None without one);
@@ -226,47 +272,69 @@ def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: i
         options[teacher_option], spec["teacher"] = str(teacher.baked), teacher.key
     key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:16]
     run_dir = Path(root) / "curves" / key / "run"
-    shutil.rmtree(run_dir, ignore_errors=True)
-    hook = Evaluator(method, steps, test_set, row.render, device)
+    earlier, seconds = resumed_points(run_dir) if resume else ([], 0.0)
+    if earlier:
+        tqdm.write(f"resuming {run_dir} with {len(earlier)} points measured "
+                   f"(training minutes after step {earlier[-1]['step']} estimated)")
+    else:
+        shutil.rmtree(run_dir, ignore_errors=True)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_atomic(run_dir / POINTS_FILE, "".join(json.dumps(p) + "\n" for p in earlier))
+    label = ",".join(f"{k}={v}" for k, v in (option or {}).items())
+
+    def rows(points: list[dict]) -> list[dict]:
+        logged = {rec["step"]: rec["psnr"] for rec in read_log(run_dir)}
+        return [{"method": method, "preset": preset, "option": label, "seed": seed, **p,
+                 "train_psnr": logged.get(p["step"]), "teacher_test_psnr": teacher_psnr}
+                for p in points]
+
+    hook = Evaluator(method, steps, test_set, row.render, device,
+                     points_file=run_dir / POINTS_FILE, points=earlier, train_seconds=seconds,
+                     on_point=on_point and (lambda points: on_point(rows(points))))
     plugin.train(str(data), run_dir, preset, seed=seed, iterations=n_iter,
                  torch_device=torch_device, progress=progress, on_step=hook,
                  downscale=downscale, **options)
-    logged = {rec["step"]: rec["psnr"] for rec in read_log(run_dir)}
-    label = ",".join(f"{k}={v}" for k, v in (option or {}).items())
-    return [{"method": method, "preset": preset, "option": label, "seed": seed, **p,
-             "train_psnr": logged.get(p["step"]), "teacher_test_psnr": teacher_psnr}
-            for p in hook.points]
+    return rows(hook.points)
+
+
+PANELS = (("test_psnr", "test PSNR (dB)"), ("test_ssim", "test SSIM"),
+          ("test_lpips", "test LPIPS-Alex (lower is better)"))
 
 
 def _plot(points: list[dict], meta: dict) -> bytes:
+    """PSNR, SSIM and LPIPS (where scored) against training minutes, one panel each."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    panels = [(k, label) for k, label in PANELS
+              if any(p.get(k) is not None for p in points)]
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.2), squeeze=False)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     groups = list(dict.fromkeys((p["preset"], p.get("option", "")) for p in points))
-    for g, (preset, option) in enumerate(groups):
-        name = f"{preset} {option}".strip()
-        mine = [p for p in points if (p["preset"], p.get("option", "")) == (preset, option)]
-        seeds = list(dict.fromkeys(p["seed"] for p in mine))
-        for i, seed in enumerate(seeds):      # one colour a curve, one line a seed
-            pts = [p for p in mine if p["seed"] == seed]
-            ax.plot([p["train_seconds"] / 60 for p in pts], [p["test_psnr"] for p in pts],
-                    marker="o", color=colours[g % len(colours)], alpha=1.0 if i == 0 else 0.55,
-                    label=f"{name} (seed{'s' if len(seeds) > 1 else ''} "
-                          f"{', '.join(map(str, seeds))})" if i == 0 else None)
-        if mine[0].get("teacher_test_psnr") is not None:
-            ax.axhline(mine[0]["teacher_test_psnr"], color=colours[g % len(colours)],
-                       linestyle="--", label=f"{name}: teacher")
-    ax.set_xlabel("training wall-clock (min, evaluations excluded)")
-    ax.set_ylabel("test PSNR (dB), baked model, OpenCL")
+    for ax, (key, label) in zip(axes[0], panels):
+        for g, (preset, option) in enumerate(groups):
+            name = f"{preset} {option}".strip()
+            mine = [p for p in points if (p["preset"], p.get("option", "")) == (preset, option)]
+            seeds = list(dict.fromkeys(p["seed"] for p in mine))
+            for i, seed in enumerate(seeds):      # one colour a curve, one line a seed
+                pts = [p for p in mine if p["seed"] == seed and p.get(key) is not None]
+                ax.plot([p["train_seconds"] / 60 for p in pts], [p[key] for p in pts],
+                        marker="o", color=colours[g % len(colours)],
+                        alpha=1.0 if i == 0 else 0.55,
+                        label=f"{name} (seed{'s' if len(seeds) > 1 else ''} "
+                              f"{', '.join(map(str, seeds))})" if i == 0 else None)
+            if key == "test_psnr" and mine[0].get("teacher_test_psnr") is not None:
+                ax.axhline(mine[0]["teacher_test_psnr"], color=colours[g % len(colours)],
+                           linestyle="--", label=f"{name}: teacher")
+        ax.set_xlabel("training wall-clock (min, evaluations excluded)")
+        ax.set_ylabel(f"{label}, baked model, OpenCL")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend()
     row = f": {meta['row']}" if meta.get("row") else ""
-    ax.set_title(f"{points[0]['method']}{row}, {meta['scene']}, git "
+    fig.suptitle(f"{points[0]['method']}{row}, {meta['scene']}, git "
                  f"{meta['git_revision']}, {meta['date'][:10]}\n{meta['device']}", fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend()
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
@@ -289,15 +357,18 @@ def write_curve(out_dir: Path, points: list[dict], meta: dict) -> str:
         writer.writerow([p["method"], p["preset"], p.get("option", ""), p["seed"], p["step"],
                          f"{p['train_seconds']:.2f}", f"{p['eval_seconds']:.2f}",
                          f"{p['test_psnr']:.4f}", f"{p['test_ssim']:.4f}",
-                         _cell(p["train_psnr"]), _cell(p["teacher_test_psnr"])])
+                         _cell(p.get("test_lpips")), _cell(p["train_psnr"]),
+                         _cell(p["teacher_test_psnr"])])
     write_atomic(Path(out_dir) / f"{KEY}.csv", buf.getvalue())
     write_atomic(Path(out_dir) / f"{KEY}.png", _plot(points, meta))
     w = max([13] + [len(p.get("option", "")) for p in points])
     lines = [f"{'preset':8s} {'option':{w}s} {'seed':>4s} {'step':>6s} {'train min':>9s} "
-             f"{'eval s':>7s} {'test PSNR':>9s} {'SSIM':>6s} {'train PSNR':>10s} {'teacher':>8s}"]
+             f"{'eval s':>7s} {'test PSNR':>9s} {'SSIM':>6s} {'LPIPS':>6s} {'train PSNR':>10s} "
+             f"{'teacher':>8s}"]
     lines += [f"{p['preset']:8s} {p.get('option', ''):{w}s} {p['seed']:4d} {p['step']:6d} "
               f"{p['train_seconds'] / 60:9.2f} "
               f"{p['eval_seconds']:7.1f} {p['test_psnr']:9.2f} {p['test_ssim']:6.3f} "
+              f"{_cell(p.get('test_lpips'), '{:6.3f}') or '   n/a'} "
               f"{_cell(p['train_psnr'], '{:10.2f}') or '       n/a'} "
               f"{_cell(p['teacher_test_psnr'], '{:8.2f}') or '     n/a'}" for p in points]
     return "\n".join(lines)
@@ -358,11 +429,13 @@ def run(args, meta: dict) -> str:
         # Seed outermost: a run cut short still holds whole pairs to compare.
         for seed in range(args.seed, args.seed + args.seeds):
             for option in curves:
-                points += measure_curve(args.cache, data, fingerprint, preset, seed=seed,
-                                        device=args.device, torch_device=args.torch_device,
-                                        method=args.method, option=option,
-                                        downscale=args.downscale, test_stride=args.test_stride,
-                                        n_points=args.points, iterations=args.iterations)
+                done = list(points)     # the files are rewritten after each evaluation
+                points = done + measure_curve(
+                    args.cache, data, fingerprint, preset, seed=seed, device=args.device,
+                    torch_device=args.torch_device, method=args.method, option=option,
+                    downscale=args.downscale, test_stride=args.test_stride,
+                    n_points=args.points, iterations=args.iterations, resume=args.resume,
+                    on_point=lambda mine: write_curve(args.out, done + mine, meta))
                 text = write_curve(args.out, points, meta)
     return text + _comparison_text(compare_options(points))
 
@@ -387,6 +460,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--iterations", type=whole_number("iterations"), default=None, metavar="N",
                    help="train N steps instead of the preset's (a budget of equal minutes for "
                         "presets or engines of different step times)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue each curve's run folder from its checkpoint (a run cut "
+                        "short), keeping the points measured before it, instead of afresh")
     options.add_common(p)
     return p
 

@@ -61,7 +61,7 @@ def score_views(renderer: Renderer, ds, lpips: bool = False, out_dir=None, prefi
 
 
 def evaluate(model, data, device=None, split: str = "test", out_dir=None, downscale: int = 1,
-             **render_options) -> dict:
+             lpips: bool = False, **render_options) -> dict:
     """PSNR, SSIM and ms/frame of a baked model on every view of ``split``.
 
     Args:
@@ -70,9 +70,10 @@ def evaluate(model, data, device=None, split: str = "test", out_dir=None, downsc
         device: OpenCL device spec.
         out_dir: when given, the renderings are written there as ``{split}_{i:03d}.png``.
         downscale: of a dataset folder (:func:`clrender.data.load_dataset`).
+        lpips: also score LPIPS-Alex; its mean is None where a view could not be scored.
         **render_options: the method's render options (NGP-RT: ``use_G``).
     Returns:
-        ``{"mean": {psnr, ssim, ms, ms_wall, ms_<stage>..., <stats>...}, "per_view": [...],
+        ``{"mean": {psnr, ssim, [lpips,] ms, ms_wall, ms_<stage>..., <stats>...}, "per_view": [...],
         "device": str}``; ``ms`` is the renderer's frame time (kernel times from OpenCL
         events, plus ray casting for NDRF), ``ms_wall`` the wall time of ``render`` with
         statistics read back; the method's statistics are means over pixels (NGP-RT:
@@ -84,8 +85,12 @@ def evaluate(model, data, device=None, split: str = "test", out_dir=None, downsc
     if not ds.cameras:
         raise ValueError(f"{getattr(ds, 'path', data)}: split {split!r} has no views")
     renderer = Renderer(model, device=device, **render_options)
-    per_view, _ = score_views(renderer, ds, out_dir=out_dir, prefix=split)
-    mean = {k: float(np.mean([v[k] for v in per_view])) for k in per_view[0] if k != "view"}
+    per_view, _ = score_views(renderer, ds, lpips=lpips, out_dir=out_dir, prefix=split)
+    mean = {k: float(np.mean([v[k] for v in per_view])) for k in per_view[0]
+            if k not in ("view", "lpips")}
+    if lpips:
+        scores = [v["lpips"] for v in per_view]
+        mean["lpips"] = None if None in scores else float(np.mean(scores))
     # The first frame may pay for buffers sized to its image: report the median time too.
     mean["ms_median"] = float(np.median([v["ms"] for v in per_view]))
     mean["ms_wall_median"] = float(np.median([v["ms_wall"] for v in per_view]))

@@ -4,6 +4,7 @@ bake and whose training is the one a run without evaluations gives."""
 from __future__ import annotations
 
 import csv
+import json
 
 import pytest
 
@@ -32,15 +33,20 @@ def test_eval_steps_span_the_run_on_logged_steps(iterations, log_every):
 def test_run_writes_every_preset_to_one_csv_and_png(tmp_path, monkeypatch, capsys):
     """The command's plumbing, training replaced by a stand-in: presets in the order given,
     one CSV and one PNG for all of them."""
-    def fake_curve(root, data, fingerprint, preset, seed=0, **kwargs):
-        return [{"method": "ngprt", "preset": preset, "seed": seed, "step": s,
-                 "train_seconds": 10.0 * s, "eval_seconds": 1.0, "test_psnr": 10.0 + s,
-                 "test_ssim": 0.5, "train_psnr": None if s else 12.0,
-                 "teacher_test_psnr": None} for s in (0, 1, 2)]
+    out = tmp_path / "out"
+    seen = []
+
+    def fake_curve(root, data, fingerprint, preset, seed=0, on_point=None, **kwargs):
+        points = [{"method": "ngprt", "preset": preset, "seed": seed, "step": s,
+                   "train_seconds": 10.0 * s, "eval_seconds": 1.0, "test_psnr": 10.0 + s,
+                   "test_ssim": 0.5, "test_lpips": 0.25, "train_psnr": None if s else 12.0,
+                   "teacher_test_psnr": None} for s in (0, 1, 2)]
+        on_point(points[:1])            # the files hold the curves so far after each point
+        seen.append(len(list(csv.DictReader((out / "train-curve.csv").open()))))
+        return points
 
     monkeypatch.setattr(train_curve, "measure_curve", fake_curve)
     (tmp_path / "scene").mkdir()
-    out = tmp_path / "out"
     assert run.main(["train-curve", "--preset", "tiny", "--preset", "cpu", "--seed", "3",
                      "--scene", str(tmp_path / "scene"), "--cache", str(tmp_path / "cache"),
                      "--out", str(out)]) == 0
@@ -48,6 +54,7 @@ def test_run_writes_every_preset_to_one_csv_and_png(tmp_path, monkeypatch, capsy
     assert [(r["preset"], r["seed"], r["step"]) for r in rows] == \
         [(p, "3", s) for p in ("tiny", "cpu") for s in "012"]
     assert rows[1]["train_psnr"] == "" and rows[0]["train_psnr"] == "12.0000"
+    assert seen == [1, 4] and rows[0]["test_lpips"] == "0.2500"
     assert (out / "train-curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "test PSNR" in capsys.readouterr().out
 
@@ -127,6 +134,23 @@ def test_test_stride_keeps_every_kth_view_from_the_first(tmp_path):
     assert (some.images == full.images[::2]).all()
 
 
+def test_resumed_points_keep_what_the_checkpoint_holds(tmp_path):
+    """A curve cut short: the points before the checkpoint's step are kept, later ones
+    dropped, and the clock resumes at the last kept point's seconds plus the untimed
+    steps at its mean step time; nothing to resume without a checkpoint."""
+    import torch
+
+    points = [{"step": s, "train_seconds": 2.0 * (s + 1), "test_psnr": 20.0 + s}
+              for s in (0, 9, 19)]
+    (tmp_path / train_curve.POINTS_FILE).write_text(
+        "".join(json.dumps(p) + "\n" for p in points))
+    assert train_curve.resumed_points(tmp_path) == ([], 0.0)
+    torch.save({"step": 15}, tmp_path / "checkpoint.pt")
+    kept, seconds = train_curve.resumed_points(tmp_path)
+    assert kept == points[:2]
+    assert seconds == pytest.approx(20.0 + 2.0 * (15 - 1 - 9))
+
+
 @pytest.mark.slow
 def test_tiny_curve_measures_the_deployed_model_without_changing_training(tmp_path,
                                                                           one_torch_thread):
@@ -143,8 +167,10 @@ def test_tiny_curve_measures_the_deployed_model_without_changing_training(tmp_pa
     scene = make_scene("bounded", tmp_path / "scene", seed=1, n_train=10, n_test=2, width=32,
                        height=32)
     cache = tmp_path / "cache"
+    calls = []
     points = train_curve.measure_curve(cache, scene, "fingerprint", "tiny", iterations=20,
-                                       progress=False)
+                                       progress=False, on_point=calls.append)
+    assert [len(c) for c in calls] == [1, 2, 3] and calls[-1] == points
     meta = {"scene": "small", "device": "cpu", "git_revision": "test", "date": "today"}
     train_curve.write_curve(tmp_path / "out", points, meta)
     rows = list(csv.DictReader((tmp_path / "out" / "train-curve.csv").open()))
@@ -156,8 +182,13 @@ def test_tiny_curve_measures_the_deployed_model_without_changing_training(tmp_pa
     assert all(5.0 < float(r["test_psnr"]) < 60.0 for r in rows)
     assert (tmp_path / "out" / "train-curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     (run_dir,) = (cache / "curves").glob("*/run")
+    logged = [json.loads(line) for line in (run_dir / train_curve.POINTS_FILE).open()]
+    assert [p["test_psnr"] for p in logged] == [p["test_psnr"] for p in points]
     tables = evaluate(bake_run(run_dir, tmp_path / "model.npz"), scene, use_G=True)
     assert points[-1]["test_psnr"] == pytest.approx(tables["mean"]["psnr"], abs=1e-6)
+    resumed = train_curve.measure_curve(cache, scene, "fingerprint", "tiny", iterations=20,
+                                        progress=False, resume=True)
+    assert resumed == points                # finished: its checkpoint is past every point
     plain = train(scene, tmp_path / "plain", preset="tiny", iterations=20, progress=False)
     curve, plain = (torch.load(d / "checkpoint.pt", weights_only=True) for d in (run_dir, plain))
     torch.testing.assert_close(curve["model"], plain["model"], rtol=0, atol=0)
