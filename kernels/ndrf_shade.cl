@@ -82,9 +82,9 @@ typedef float16 hvec;
 #endif
 
 #if FAST_MATH
-#define NDRF_EXP native_exp
+#define EXP native_exp
 #else
-#define NDRF_EXP exp
+#define EXP exp
 #endif
 
 #define PAD (KSIZE - 1)
@@ -160,7 +160,8 @@ __kernel void ndrf_zero_padding(const int width, const int rows, const int top_r
     for (int c = 0; c < H_STRIDE; ++c) h[c] = 0.0f;
 }
 
-inline int ndrf_covered(const Frame *f, int p)
+/* Whether pixel p is covered: a hit on some mesh (hits.Hits.coverage). */
+inline int coverage(const Frame *f, int p)
 {
     const int n = f->width * f->height;
     for (int k = 0; k < K; ++k)
@@ -168,12 +169,12 @@ inline int ndrf_covered(const Frame *f, int p)
     return 0;
 }
 
-/* d, then sin(2^i d), cos(2^i d) for i < N_FREQ (2^i d: exact scaling, as in the
- * reference), five frequencies at a time: one float16 call vectorises where a scalar call
+/* d, then sin(2^i d), cos(2^i d) for i < N_FREQ (shader_ref.view_encoding; 2^i d: exact
+ * scaling, as in the reference), five frequencies at a time: one float16 call vectorises where a scalar call
  * per channel does not (docs/vendors.md, "PoCL facts the kernels rely on"). sincos() shares the range reduction; under
  * -D OCLGRIND separate sin() and cos(): sincos() breaks the --uninitialized plugin of
  * Oclgrind 21.10 (its output pointer). */
-inline void ndrf_view_encoding(float3 d, float *v)
+inline void view_encoding(float3 d, float *v)
 {
     vstore3(d, 0, v);
     float scale = 1.0f;
@@ -200,8 +201,9 @@ inline void ndrf_view_encoding(float3 d, float *v)
     }
 }
 
-/* The C_IN screen channels of pixel (px, py) into out; all zeros outside the image. */
-inline void ndrf_screen_pixel(const Frame *f, int px, int py, float *out)
+/* The C_IN screen channels of pixel (px, py) into out (shader_ref.screen_buffer, one
+ * pixel); all zeros outside the image. */
+inline void screen_pixel(const Frame *f, int px, int py, float *out)
 {
     if (px >= f->width || py >= f->height) {
         for (int c = 0; c < C_IN; ++c) out[c] = 0.0f;
@@ -229,7 +231,7 @@ inline void ndrf_screen_pixel(const Frame *f, int px, int py, float *out)
         vstore8(feat, 0, out + FEATURES * k);
         for (int e = 0; e < 3; ++e) out[FEATURES * K + 3 * k + e] = x[e];
     }
-    ndrf_view_encoding(camera_ray_dir(f->cam, px, py), out + VIEW_OFF);
+    view_encoding(camera_ray_dir(f->cam, px, py), out + VIEW_OFF);
 }
 
 #define FRAME_ARGS __global const float *cam, const int width, const int height, \
@@ -243,22 +245,22 @@ __kernel void ndrf_screen(FRAME_ARGS, __global float *screen)
     if (px >= width || py >= height) return;
     const Frame f = FRAME_INIT;
     float out[C_IN];
-    ndrf_screen_pixel(&f, px, py, out);
+    screen_pixel(&f, px, py, out);
     for (int c = 0; c < C_IN; ++c) screen[(size_t)(py * width + px) * C_IN + c] = out[c];
 }
 
 /* Whether any pixel of columns x0..x0+nx-1, rows y0..y0+ny-1 (clipped to the image) is
  * covered. */
-inline int ndrf_any_covered(const Frame *f, int x0, int y0, int nx, int ny)
+inline int any_covered(const Frame *f, int x0, int y0, int nx, int ny)
 {
     const int x1 = min(x0 + nx, f->width), y1 = min(y0 + ny, f->height);
     for (int y = y0; y < y1; ++y)
         for (int x = x0; x < x1; ++x)
-            if (ndrf_covered(f, y * f->width + x)) return 1;
+            if (coverage(f, y * f->width + x)) return 1;
     return 0;
 }
 
-inline hvec ndrf_relu(hvec x)
+inline hvec relu(hvec x)
 {
     return x > 0.0f ? x : (hvec)(0.0f);
 }
@@ -267,9 +269,9 @@ inline hvec ndrf_relu(hvec x)
  * vi[3k + e] the vertices (concatenated numbering) of its hit on mesh k, -1 on a miss or
  * outside the image, vw[3k + e] their barycentric weights (1-u-v, u, v); exact build: the
  * view encoding's VIEW_C channels, untouched outside the image (*inside = 0). (The fast
- * build's view table lookups come a row at a time: ndrf_view_nodes.) */
-inline void ndrf_conv0_pixel(const Frame *f, int px, int py, int *inside, int *vi, float *vw,
-                             float *view)
+ * build's view table lookups come a row at a time: view_nodes.) */
+inline void conv0_pixel(const Frame *f, int px, int py, int *inside, int *vi, float *vw,
+                        float *view)
 {
     *inside = px < f->width && py < f->height;
     for (int e = 0; e < 3 * K; ++e) {
@@ -296,7 +298,7 @@ inline void ndrf_conv0_pixel(const Frame *f, int px, int py, int *inside, int *v
 #if !FAST_MATH
     float dc[3];
     camera_ray_dir_into(f->cam, px, py, dc);
-    ndrf_view_encoding(vload3(0, dc), view);
+    view_encoding(vload3(0, dc), view);
 #endif
 }
 
@@ -304,8 +306,8 @@ inline void ndrf_conv0_pixel(const Frame *f, int px, int py, int *inside, int *v
  * row py, one a lane: node[c] and frac[c] for direction component c. The ray direction of
  * kernels/camera.h with one division where it has five (inv_f: the reciprocal focal
  * lengths, once a work-item): a few ulp off. */
-inline void ndrf_view_nodes(__global const float *cam, const float *inv_f, int x0, int py,
-                            row_int *node, row_float *frac)
+inline void view_nodes(__global const float *cam, const float *inv_f, int x0, int py,
+                       row_int *node, row_float *frac)
 {
     const row_int px = x0 + ROW_LANE_IDS;
     const row_float a = (CONVERT_ROW_FLOAT(px) + 0.5f - cam[CAM_CX]) * inv_f[0];
@@ -327,9 +329,9 @@ inline void ndrf_view_nodes(__global const float *cam, const float *inv_f, int x
 
 /* acc += tap t of one screen pixel (all H_STRIDE outputs, NB vectors): its geometry
  * through the per-vertex projections plus its view encoding's (weights, or table lerp). */
-inline void ndrf_tap(hvec *acc, int t, const int *vi, const float *vw, const float *view,
-                     const int *node, const float *frac, __global const float *proj,
-                     __global const float *w_view)
+inline void tap(hvec *acc, int t, const int *vi, const float *vw, const float *view,
+                const int *node, const float *frac, __global const float *proj,
+                __global const float *w_view)
 {
     for (int e = 0; e < 3 * K; ++e) {
         if (vi[e] < 0) continue;
@@ -373,7 +375,7 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
     const int nx = min(SEG, width - x0) + PAD, ny = min(ROWS, y_end - y0) + PAD;
     /* hidden (x, y) is read by the covered pixels among (x..x+PAD, y..y+PAD): conv0's own
      * input pixels. */
-    if (!ndrf_any_covered(&f, x0, y0, nx, ny)) return;
+    if (!any_covered(&f, x0, y0, nx, ny)) return;
     int inside[ROWS + PAD][SEG + PAD], vi[ROWS + PAD][SEG + PAD][3 * K];
     int node[ROWS + PAD][SEG + PAD][3];
     float vw[ROWS + PAD][SEG + PAD][3 * K], frac[ROWS + PAD][SEG + PAD][3];
@@ -383,13 +385,13 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
 #endif
     for (int r = 0; r < ny; ++r) {
         for (int i = 0; i < nx; ++i)
-            ndrf_conv0_pixel(&f, x0 + i, y0 + r, &inside[r][i], vi[r][i], vw[r][i], view[r][i]);
+            conv0_pixel(&f, x0 + i, y0 + r, &inside[r][i], vi[r][i], vw[r][i], view[r][i]);
 #if FAST_MATH
         row_int row_node[3];
         row_float row_frac[3];
         int nodes[3][ROW_LANES];
         float fracs[3][ROW_LANES];
-        ndrf_view_nodes(cam, inv_f, x0, y0 + r, row_node, row_frac);
+        view_nodes(cam, inv_f, x0, y0 + r, row_node, row_frac);
         for (int c = 0; c < 3; ++c) {
             ROW_STORE(row_node[c], nodes[c]);
             ROW_STORE(row_frac[c], fracs[c]);
@@ -414,13 +416,13 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
             for (int dy = 0; dy < KSIZE; ++dy)
                 for (int dx = 0; dx < KSIZE; ++dx)
                     if (inside[r + dy][q + dx])
-                        ndrf_tap(acc, dy * KSIZE + dx, vi[r + dy][q + dx], vw[r + dy][q + dx],
-                                 view[r + dy][q + dx], node[r + dy][q + dx],
-                                 frac[r + dy][q + dx], proj, w_view);
+                        tap(acc, dy * KSIZE + dx, vi[r + dy][q + dx], vw[r + dy][q + dx],
+                            view[r + dy][q + dx], node[r + dy][q + dx],
+                            frac[r + dy][q + dx], proj, w_view);
             __global float *h = hidden + ((size_t)(y0 + r - y_band + PAD) * (width + PAD)
                                           + x0 + q + PAD) * H_STRIDE;
             #pragma unroll
-            for (int j = 0; j < NB; ++j) vstore_h(ndrf_relu(acc[j]), j, h);
+            for (int j = 0; j < NB; ++j) vstore_h(relu(acc[j]), j, h);
         }
     }
 }
@@ -428,7 +430,7 @@ __kernel void ndrf_conv0(FRAME_ARGS, __global const float *proj, __global const 
 /* The sum of a's lanes by halving (a scalar loop costs PoCL more than the conv itself):
  * .lo/.hi shuffles in registers; under -D OCLGRIND the same sums through private memory,
  * as the shuffles crash the --uninitialized plugin of Oclgrind 21.10. */
-inline float ndrf_sum(hvec a)
+inline float sum_lanes(hvec a)
 {
 #ifndef OCLGRIND
 #if H_VEC == 16
@@ -451,10 +453,11 @@ inline float ndrf_sum(hvec a)
 #endif
 }
 
-/* The three colour channels at once (lane 3 unused): one vector exp instead of three. */
-inline float4 ndrf_sigmoid(float4 x)
+/* shader_ref.sigmoid of the three colour channels at once (lane 3 unused): one vector exp
+ * instead of three. */
+inline float4 sigmoid(float4 x)
 {
-    return 1.0f / (1.0f + NDRF_EXP(-x));
+    return 1.0f / (1.0f + EXP(-x));
 }
 
 /* Rows y_band .. y_end - 1 of the image. */
@@ -467,7 +470,7 @@ __kernel void ndrf_conv1(FRAME_ARGS, __global const float *hidden, __global cons
     if (px >= width || py >= y_end) return;
     const Frame f = FRAME_INIT;
     const int p = py * width + px;
-    if (!ndrf_covered(&f, p)) {
+    if (!coverage(&f, p)) {
         rgb[3 * p] = bg_r;
         rgb[3 * p + 1] = bg_g;
         rgb[3 * p + 2] = bg_b;
@@ -487,7 +490,7 @@ __kernel void ndrf_conv1(FRAME_ARGS, __global const float *hidden, __global cons
             }
         }
     }
-    const float4 c = ndrf_sigmoid((float4)(b1[0] + ndrf_sum(a0), b1[1] + ndrf_sum(a1),
-                                           b1[2] + ndrf_sum(a2), 0.0f));
+    const float4 c = sigmoid((float4)(b1[0] + sum_lanes(a0), b1[1] + sum_lanes(a1),
+                                      b1[2] + sum_lanes(a2), 0.0f));
     vstore3(c.xyz, p, rgb);
 }

@@ -41,13 +41,13 @@
 #else
 #define WEIGHT __global const float
 #endif
-/* The code's shape fixes these: the march writes 7 features + opacity per pixel, ngp_sh4
+/* The code's shape fixes these: the march writes 7 features + opacity per pixel, sh4
  * spells out degree 4, the hidden layers run four outputs per pass. */
 #if FEATURES != 8
 #error "FEATURES must be 8: the march writes 7 composited features and the opacity"
 #endif
 #if SH_DIM != 16
-#error "SH_DIM must be 16: ngp_sh4 spells out degree 4"
+#error "SH_DIM must be 16: sh4 spells out degree 4"
 #endif
 #if DEFERRED_HIDDEN % 4 != 0
 #error "DEFERRED_HIDDEN must be a multiple of 4"
@@ -81,7 +81,7 @@ typedef float16 vfloat;
 
 /* Degree-4 real SH of a unit direction (encoding.sh4, its constants SH_C0 .. SH_C10 and
  * order). */
-inline void ngp_sh4(float3 d, float *out)
+inline void sh4(float3 d, float *out)
 {
     const float x = d.x, y = d.y, z = d.z;
     const float xy = x * y, xz = x * z, yz = y * z;
@@ -105,14 +105,14 @@ inline void ngp_sh4(float3 d, float *out)
 }
 
 /* max(x, 0) per lane; a select rather than fmax, which PoCL calls out of line. */
-inline vfloat ngp_relu(vfloat x)
+inline vfloat relu(vfloat x)
 {
     return x > 0.0f ? x : (vfloat)(0.0f);
 }
 
 /* out[j] = relu(sum_i in[i] * w[i, j] + b[j]) for j < HID; four outputs per pass so
  * each input vector is loaded once for four broadcast weights. */
-inline void ngp_dense_relu(const vfloat *in, int n_in, WEIGHT *w, WEIGHT *b, vfloat *out)
+inline void dense_relu(const vfloat *in, int n_in, WEIGHT *w, WEIGHT *b, vfloat *out)
 {
     for (int j = 0; j < HID; j += 4) {
         vfloat a0 = 0.0f, a1 = 0.0f, a2 = 0.0f, a3 = 0.0f;
@@ -124,17 +124,17 @@ inline void ngp_dense_relu(const vfloat *in, int n_in, WEIGHT *w, WEIGHT *b, vfl
             a2 = a2 + x * wi[2];
             a3 = a3 + x * wi[3];
         }
-        out[j] = ngp_relu(a0 + b[j]);
-        out[j + 1] = ngp_relu(a1 + b[j + 1]);
-        out[j + 2] = ngp_relu(a2 + b[j + 2]);
-        out[j + 3] = ngp_relu(a3 + b[j + 3]);
+        out[j] = relu(a0 + b[j]);
+        out[j + 1] = relu(a1 + b[j + 1]);
+        out[j + 2] = relu(a2 + b[j + 2]);
+        out[j + 3] = relu(a3 + b[j + 3]);
     }
 }
 
 /* Gathers the inputs x (IN lane-vectors) and the opacity of pixels p0 .. p0+VEC-1;
  * lanes past the image get zeros. */
-inline void ngp_load_inputs(__global const float *cam, int width, int n_pix, int p0,
-                            __global const float *feat, vfloat *x, vfloat *opacity)
+inline void load_inputs(__global const float *cam, int width, int n_pix, int p0,
+                        __global const float *feat, vfloat *x, vfloat *opacity)
 {
     for (int lane = 0; lane < DEFERRED_VEC; ++lane) {
         const int p = p0 + lane;
@@ -146,7 +146,7 @@ inline void ngp_load_inputs(__global const float *cam, int width, int n_pix, int
             /* p - py * width, not p % width: LLVM turns a div/rem pair into a freeze
              * instruction, which Oclgrind 21.10's uninitialised-value check aborts on. */
             const int py = p / width;
-            ngp_sh4(camera_ray_dir(cam, p - py * width, py), sh);
+            sh4(camera_ray_dir(cam, p - py * width, py), sh);
         }
         const float *fv = (const float *)&f;
         for (int i = 0; i < N_FEAT; ++i) LANE(x[i], lane) = fv[i];
@@ -178,9 +178,9 @@ void ngprt_deferred(__global const float *cam, const int width, const int n_pix,
         return;
     }
     vfloat x[IN], h1[HID], h2[HID], opacity;
-    ngp_load_inputs(cam, width, n_pix, p0, feat, x, &opacity);
-    ngp_dense_relu(x, IN, params + P_W0, params + P_B0, h1);
-    ngp_dense_relu(h1, HID, params + P_W1, params + P_B1, h2);
+    load_inputs(cam, width, n_pix, p0, feat, x, &opacity);
+    dense_relu(x, IN, params + P_W0, params + P_B0, h1);
+    dense_relu(h1, HID, params + P_W1, params + P_B1, h2);
     WEIGHT *w2 = params + P_W2, *b2 = params + P_B2;
     vfloat o0 = 0.0f, o1 = 0.0f, o2 = 0.0f;
     for (int i = 0; i < HID; ++i) {
@@ -188,9 +188,9 @@ void ngprt_deferred(__global const float *cam, const int width, const int n_pix,
         o1 = o1 + h2[i] * w2[3 * i + 1];
         o2 = o2 + h2[i] * w2[3 * i + 2];
     }
-    const vfloat c0 = NGP_RECIP(1.0f + NGP_EXP(-(x[0] + o0 + b2[0])));
-    const vfloat c1 = NGP_RECIP(1.0f + NGP_EXP(-(x[1] + o1 + b2[1])));
-    const vfloat c2 = NGP_RECIP(1.0f + NGP_EXP(-(x[2] + o2 + b2[2])));
+    const vfloat c0 = RECIP(1.0f + EXP(-(x[0] + o0 + b2[0])));
+    const vfloat c1 = RECIP(1.0f + EXP(-(x[1] + o1 + b2[1])));
+    const vfloat c2 = RECIP(1.0f + EXP(-(x[2] + o2 + b2[2])));
     const vfloat transparent = 1.0f - opacity;
     const vfloat r = c0 * opacity + bg_r * transparent;
     const vfloat g = c1 * opacity + bg_g * transparent;

@@ -6,16 +6,16 @@
 #include "ngprt_math.h"
 #include "ngprt_model.h"
 
-/* Attention weights of 8 logits at once: one vector exp (Eq. 7-8). */
-inline float8 ngp_sigmoid8(float8 x)
+/* Attention weights of 8 logits at once (render_ref._sigmoid): one vector exp (Eq. 7-8). */
+inline float8 sigmoid(float8 x)
 {
-    return NGP_RECIP(1.0f + NGP_EXP(-x));
+    return RECIP(1.0f + EXP(-x));
 }
 
 /* The `mlp` fusion: relu([f^0 .. f^{L-1}] @ w0 + b0) @ w1 + b1; params packed as
  * [w0 (8L, 64), b0 (64), w1 (64, 8), b1 (8)], every part a multiple of 8 floats, so
  * the hidden layer runs as 8 float8 lanes of 8 units each with aligned reads. */
-inline float8 ngp_fuse_mlp(const float8 *fl, __global const float *p)
+inline float8 fuse_mlp(const float8 *fl, __global const float *p)
 {
     __global const float8 *w0 = (__global const float8 *)p;
     __global const float8 *b0 = w0 + L * FUSION_HIDDEN;
@@ -42,10 +42,10 @@ inline float8 ngp_fuse_mlp(const float8 *fl, __global const float *p)
 /* Fusion of the fine features by VARIANT (docs/ngprt.md "Fusion"): sig holds the
  * attention weights sigmoid(logit) in logit order, from the coarse attention channels
  * (-v) or the invariant parameters (-inv); unused by sum and mlp. */
-inline float8 ngp_fuse(const float8 *fl, const float8 *sig, __global const float *params)
+inline float8 fuse(const float8 *fl, const float8 *sig, __global const float *params)
 {
 #if VARIANT == VARIANT_MLP
-    return ngp_fuse_mlp(fl, params);
+    return fuse_mlp(fl, params);
 #else
     float8 out = (float8)(0.0f);
     const float *a = (const float *)sig;
@@ -66,13 +66,13 @@ inline float8 ngp_fuse(const float8 *fl, const float8 *sig, __global const float
 
 /* The attention weights of the -inv variants, sigmoid of the invariant logits (N_INV
  * of fusion, padded to float8 chunks); zeros for the other variants. */
-inline void ngp_inv_sigmoids(__global const float *fusion, float8 *inv_sig)
+inline void inv_sigmoids(__global const float *fusion, float8 *inv_sig)
 {
 #if INV_VEC > 0
     for (int a = 0; a < INV_VEC; ++a) {
         float8 logit = (float8)(0.0f);
         for (int q = 0; q < 8 && 8 * a + q < N_INV; ++q) ((float *)&logit)[q] = fusion[8 * a + q];
-        inv_sig[a] = ngp_sigmoid8(logit);
+        inv_sig[a] = sigmoid(logit);
     }
 #else
     inv_sig[0] = (float8)(0.0f);

@@ -4,7 +4,7 @@
  * Masks are -1 (true) / 0 in every lane, as vector comparisons give them; VMASK turns a
  * comparison into one at every width (a scalar comparison gives 1 / 0). Masks are only
  * combined with & | ~, tested with any() and consumed by select(): arithmetic on a mask
- * (n -= mask) is spelled with the named helpers below (v_inc), built on select(). Oclgrind
+ * (n -= mask) is spelled with the named helpers below (lane_inc), built on select(). Oclgrind
  * 21.10 evaluates a vector mask turned into a number (-mask, mask & 1, mask ? 1 : 0) as
  * 255 per true lane; comparisons, & | ~, any(), all(), select() and as_int it gets right
  * (probed at widths 2-16), so the vector march runs under it as on a device.
@@ -91,26 +91,26 @@ typedef uint16 vuint;
 #define FOR_LANES(j) for (int j = 0; j < RAYS; ++j)
 
 /* Three coordinates of RAYS points (or directions), and of RAYS cells. */
-typedef struct { vfloat x, y, z; } vpoint;
-typedef struct { vint x, y, z; } vcell;
+typedef struct { vfloat x, y, z; } Point3;
+typedef struct { vint x, y, z; } Cell3;
 
 /* n + 1 in the lanes of mask, n elsewhere. */
-inline vint v_inc(vint n, vint mask) { return select(n, n + 1, mask); }
+inline vint lane_inc(vint n, vint mask) { return select(n, n + 1, mask); }
 
 /* min / max / abs as selects: PoCL lowers fmin / fmax / fabs to library calls (~10 ns
  * each on the CPU); these give identical results for the finite values used here. */
-inline vfloat v_min(vfloat a, vfloat b) { return select(b, a, VMASK(a < b)); }
-inline vfloat v_max(vfloat a, vfloat b) { return select(b, a, VMASK(a > b)); }
-inline vfloat v_abs(vfloat a) { return select(a, -a, VMASK(a < 0.0f)); }
+inline vfloat lane_min(vfloat a, vfloat b) { return select(b, a, VMASK(a < b)); }
+inline vfloat lane_max(vfloat a, vfloat b) { return select(b, a, VMASK(a > b)); }
+inline vfloat lane_abs(vfloat a) { return select(a, -a, VMASK(a < 0.0f)); }
 
 /* floor / ceil as ints, for |x| < 2^31. */
-inline vint v_floor_i(vfloat x)
+inline vint lane_floor_i(vfloat x)
 {
     const vint i = VI(x);
     return select(i, i - 1, VMASK(VF(i) > x));
 }
 
-inline vint v_ceil_i(vfloat x)
+inline vint lane_ceil_i(vfloat x)
 {
     const vint i = VI(x);
     return select(i, i + 1, VMASK(VF(i) < x));
@@ -118,19 +118,19 @@ inline vint v_ceil_i(vfloat x)
 
 /* b[idx] of the lanes in mask, 0 elsewhere (the other lanes read b[0]: their idx may be
  * out of range); bytes, shorts or ints. */
-inline vint v_gather_u8(__global const uchar *b, vint idx, vint mask)
+inline vint lane_gather_u8(__global const uchar *b, vint idx, vint mask)
 {
     const vint i = select((vint)(0), idx, mask);
     return select((vint)(0), GATHER(b, i), mask);
 }
 
-inline vint v_gather_u16(__global const ushort *b, vint idx, vint mask)
+inline vint lane_gather_u16(__global const ushort *b, vint idx, vint mask)
 {
     const vint i = select((vint)(0), idx, mask);
     return select((vint)(0), GATHER(b, i), mask);
 }
 
-inline vint v_gather_i32(__global const int *b, vint idx, vint mask)
+inline vint lane_gather_i32(__global const int *b, vint idx, vint mask)
 {
     const vint i = select((vint)(0), idx, mask);
     return select((vint)(0), GATHER(b, i), mask);

@@ -35,38 +35,38 @@
  * build so that the timed kernels are unchanged. */
 typedef struct {
     vint occupancy, G, features;
-} v_reads;
+} Reads;
 
 /* n + c in the lanes of mask, n elsewhere. */
-inline vint v_add(vint n, vint c, vint mask) { return select(n, n + c, mask); }
+inline vint lane_add(vint n, vint c, vint mask) { return select(n, n + c, mask); }
 
 /* The reads of one marching point of the lanes in `active` whose exit code is `code`:
  * the paper reads levels N_MIP - 1 .. exit level (all N_MIP at a sample), ours one exit
  * code; G where the exit level is coarser than G, unless the code carries it (ours with
  * G_IN_CODE); a sample's features (marches.feature_reads). */
-inline void v_count_reads(v_reads *n, vint code, vint active, vint sample, vint empty)
+inline void count_reads(Reads *n, vint code, vint active, vint sample, vint empty)
 {
 #if MARCH_PAPER
-    n->occupancy = v_add(n->occupancy, select((vint)(N_MIP + 1) - code, (vint)(N_MIP),
-                                              sample), active);
+    n->occupancy = lane_add(n->occupancy, select((vint)(N_MIP + 1) - code, (vint)(N_MIP),
+                                                 sample), active);
 #else
-    n->occupancy = v_inc(n->occupancy, active);
+    n->occupancy = lane_inc(n->occupancy, active);
 #endif
 #if USE_G && (MARCH_PAPER || !G_IN_CODE)
     const vint lev = CODE_LEVEL(code) - 1;
-    n->G = v_inc(n->G, empty & VMASK(((vint)(OCC_RES) >> lev) < G_RES));
+    n->G = lane_inc(n->G, empty & VMASK(((vint)(OCC_RES) >> lev) < G_RES));
 #endif
-    n->features = v_add(n->features, (vint)(9 + 8 * L), sample);
+    n->features = lane_add(n->features, (vint)(9 + 8 * L), sample);
 }
 #endif
 
 /* End t_{k+1} of the interval of each lane's lattice point k (render_ref.next_t): an
  * unbounded ray's last interval ends at the ray's end. */
-inline vfloat v_next_t(const v_rays *r)
+inline vfloat next_t(const Rays *r)
 {
-    const vfloat g_next = v_lattice_g(r, r->k + 1);
+    const vfloat g_next = lattice_g(r, r->k + 1);
 #if UNBOUNDED
-    return select((vfloat)(r->far), v_lattice_t(r->lt, v_min(g_next, r->g_end)),
+    return select((vfloat)(r->far), lattice_t(r->lt, lane_min(g_next, r->g_end)),
                   VMASK(g_next < r->g_end));
 #else
     return g_next;
@@ -76,23 +76,23 @@ inline vfloat v_next_t(const v_rays *r)
 /* Alpha-composites the samples of the lanes in `sample` at p and steps them on
  * (render_ref.composite): the features lane by lane, density and alpha for all lanes
  * at once (two vector exps); the march loop counts the samples. */
-inline void v_composite(const ngp_model *m, v_rays *r, const v_march_point *p, vint sample)
+inline void composite(const Model *m, Rays *r, const MarchPoint *p, vint sample)
 {
     vint idx[N_CORNERS];
     vfloat wt[N_CORNERS];
-    v_coarse_corners(m, p, sample, idx, wt);
-    v_fine_corners(p, idx, wt);
+    coarse_corners(m, p, sample, idx, wt);
+    fine_corners(p, idx, wt);
     float8 f[RAYS];
     float logit[RAYS];
     FOR_LANES(j) {
         logit[j] = 0.0f;
         if (LANE_I(sample, j)) {
-            f[j] = ngp_lane_features(j, idx, wt, m->blocks, m->tables, m->fusion, m->inv_sig);
+            f[j] = features(j, idx, wt, m->blocks, m->tables, m->fusion, m->inv_sig);
             logit[j] = f[j].s0;
         }
     }
-    const vfloat sigma = NGP_EXP(VLOAD(logit));
-    const vfloat alpha = 1.0f - NGP_EXP(-sigma * (v_next_t(r) - p->t));
+    const vfloat sigma = EXP(VLOAD(logit));
+    const vfloat alpha = 1.0f - EXP(-sigma * (next_t(r) - p->t));
     const vfloat w = r->T * alpha;
     FOR_LANES(j) {
         if (LANE_I(sample, j)) r->acc[j] = r->acc[j] + LANE_F(w, j) * f[j];
@@ -100,19 +100,19 @@ inline void v_composite(const ngp_model *m, v_rays *r, const v_march_point *p, v
     r->opacity = select(r->opacity, r->opacity + w, sample);
     r->depth_acc = select(r->depth_acc, r->depth_acc + w * p->t, sample);
     r->T = select(r->T, r->T * (1.0f - alpha), sample);
-    r->k = v_inc(r->k, sample);
+    r->k = lane_inc(r->k, sample);
 }
 
 /* Lanes still marching: the next lattice point before the ray's end, T >= T_STOP. */
-inline vint v_marching(const v_rays *r)
+inline vint marching(const Rays *r)
 {
-    return VMASK(v_lattice_g(r, r->k) < r->g_end) & VMASK(r->T >= T_STOP);
+    return VMASK(lattice_g(r, r->k) < r->g_end) & VMASK(r->T >= T_STOP);
 }
 
 /* Writes lane j's outputs for pixel n. */
-inline void ngp_write_pixel(const v_rays *r, int j, int n, __global float *feat,
-                            __global float *depth, __global int *n_march,
-                            __global int *n_occ)
+inline void write_pixel(const Rays *r, int j, int n, __global float *feat,
+                        __global float *depth, __global int *n_march,
+                        __global int *n_occ)
 {
     const float8 a = r->acc[j];
     /* acc.s0 accumulated w * sigma-logit; slot 7 carries the opacity instead. */
@@ -145,44 +145,44 @@ void ngprt_march(__global const float *cam, const int width, const int height,
 {
     const int px0 = (int)get_global_id(0) * RAYS, py = get_global_id(1);
     if (px0 >= width || py >= height) return;
-    ngp_model m = {occupancy, G, block_index, blocks, n_blocks, tables, fusion};
-    ngp_inv_sigmoids(fusion, m.inv_sig);
-    v_lattice lattice;
+    Model m = {occupancy, G, block_index, blocks, n_blocks, tables, fusion};
+    inv_sigmoids(fusion, m.inv_sig);
+    Lattice lattice;
     float8 acc[RAYS];
-    v_rays r = {.lt = &lattice, .acc = acc};
-    vint active = v_rays_start(&r, cam, px0 + LANE_IDS, py, width, s, near, far);
-    active = active & v_marching(&r);
+    Rays r = {.lt = &lattice, .acc = acc};
+    vint active = rays_start(&r, cam, px0 + LANE_IDS, py, width, s, near, far);
+    active = active & marching(&r);
 #if COUNT_READS
-    v_reads reads = {(vint)(0), (vint)(0), (vint)(0)};
+    Reads reads = {(vint)(0), (vint)(0), (vint)(0)};
 #endif
     while (any(active)) {
-        const v_march_point p = v_point_at(&r, r.k);
+        const MarchPoint p = march_point(&r, r.k);
 #if MARCH_PAPER
-        const vint code = v_paper_code(m.occupancy, p.cell, active);
+        const vint code = exit_code(m.occupancy, p.cell, active);
 #else
-        const vint code = v_gather_u16(m.occupancy, v_flat(p.cell, (vint)(OCC_RES)), active);
+        const vint code = lane_gather_u16(m.occupancy, flat_index(p.cell, (vint)(OCC_RES)), active);
 #endif
         const vint sample = active & VMASK(CODE_LEVEL(code) == 0);
         const vint empty = active & ~sample;
-        /* Both counters here, outside the branches: counted inside v_composite, Intel's
+        /* Both counters here, outside the branches: counted inside composite, Intel's
          * CPU compiler (RAYS = 1, no G) lost n_occ (docs/vendors.md, "Intel lost the
          * march's sample count"). */
-        r.n_march = v_inc(r.n_march, active);
-        r.n_occ = v_inc(r.n_occ, sample);
+        r.n_march = lane_inc(r.n_march, active);
+        r.n_occ = lane_inc(r.n_occ, sample);
 #if COUNT_READS
-        v_count_reads(&reads, code, active, sample, empty);
+        count_reads(&reads, code, active, sample, empty);
 #endif
-        if (any(sample)) v_composite(&m, &r, &p, sample);
+        if (any(sample)) composite(&m, &r, &p, sample);
 #if MARCH_PAPER
-        if (any(empty)) r.k = select(r.k, v_paper_skip(&m, &r, &p, empty, code), empty);
+        if (any(empty)) r.k = select(r.k, paper_skip(&m, &r, &p, empty, code), empty);
 #else
-        if (any(empty)) r.k = select(r.k, v_skip(&m, &r, &p, empty, code), empty);
+        if (any(empty)) r.k = select(r.k, skip(&m, &r, &p, empty, code), empty);
 #endif
-        active = active & v_marching(&r);
+        active = active & marching(&r);
     }
     FOR_LANES(j) {
         if (px0 + j >= width) break;
-        ngp_write_pixel(&r, j, py * width + px0 + j, feat, depth, n_march_out, n_occ_out);
+        write_pixel(&r, j, py * width + px0 + j, feat, depth, n_march_out, n_occ_out);
 #if COUNT_READS
         __global int *out = reads_out + 3 * (size_t)(py * width + px0 + j);
         out[0] = LANE_I(reads.occupancy, j);

@@ -91,5 +91,5 @@ typedef struct {
     __global const float8 *tables;     /* L * 2^LOG2_T: the fine hash tables */
     __global const float *fusion;      /* render_cl.fusion_params */
     float8 inv_sig[SIG_LEN];           /* -inv variants: sigmoid of the invariant logits */
-} ngp_model;
+} Model;
 #endif

@@ -144,8 +144,8 @@ def test_torch_lattice_equals_reference():
 
 
 def test_kernel_lattice_equals_reference(cl_platform):
-    """The kernel's v_lattice_build / _t / _s (exact build, one lane) on the same rays;
-    the renders with 1, 4 and 16 lanes hold the march to the reference
+    """The kernel's lattice_table, lattice_t and lattice_s (exact build, one lane) on the
+    same rays; the renders with 1, 4 and 16 lanes hold the march to the reference
     (tests/test_render_cl.py, test_ngprt_unbounded.py)."""
     import pyopencl as cl
 
@@ -165,18 +165,18 @@ def test_kernel_lattice_equals_reference(cl_platform):
     {
         const int i = get_global_id(0);
         const float3 d3 = vload3(2 * i + 1, od);
-        vpoint d;
+        Point3 d;
         d.x = d3.x;
         d.y = d3.y;
         d.z = d3.z;
-        v_lattice lt;
-        v_lattice_build(vload3(2 * i, od), d, near, far, &lt);
+        Lattice lt;
+        lattice_table(vload3(2 * i, od), d, near, far, &lt);
         __global float *w = table + i * 67;
         for (int q = 0; q < 14; ++q) { w[q] = lt.brk[q]; w[14 + q] = lt.cum[q]; }
         for (int q = 0; q < 13; ++q) { w[28 + q] = lt.A[q]; w[41 + q] = lt.B[q]; w[54 + q] = lt.K[q]; }
         for (int q = 0; q < m; ++q) {
-            t_out[i * m + q] = v_lattice_t(&lt, sigma[i * m + q]);
-            s_out[i * m + q] = v_lattice_s(&lt, ts[i * m + q]);
+            t_out[i * m + q] = lattice_t(&lt, sigma[i * m + q]);
+            s_out[i * m + q] = lattice_s(&lt, ts[i * m + q]);
         }
     }
     """
