@@ -11,6 +11,11 @@ import pytest
 from bench import run, train_curve
 
 
+def csv_rows(path) -> list[dict]:
+    """The rows of a CSV file, read whole (no file left open)."""
+    return list(csv.DictReader(path.read_text().splitlines()))
+
+
 def test_argparse_accepts_repeated_presets_for_the_curve_only(tmp_path, capsys):
     args = train_curve.build_parser().parse_args(["--preset", "cpu", "--preset", "tiny"])
     assert args.presets == ["cpu", "tiny"]
@@ -42,7 +47,7 @@ def test_run_writes_every_preset_to_one_csv_and_png(tmp_path, monkeypatch, capsy
                    "test_ssim": 0.5, "test_lpips": 0.25, "train_psnr": None if s else 12.0,
                    "teacher_test_psnr": None} for s in (0, 1, 2)]
         on_point(points[:1])            # the files hold the curves so far after each point
-        seen.append(len(list(csv.DictReader((out / "train-curve.csv").open()))))
+        seen.append(len(csv_rows(out / "train-curve.csv")))
         return points
 
     monkeypatch.setattr(train_curve, "measure_curve", fake_curve)
@@ -50,7 +55,7 @@ def test_run_writes_every_preset_to_one_csv_and_png(tmp_path, monkeypatch, capsy
     assert run.main(["train-curve", "--preset", "tiny", "--preset", "cpu", "--seed", "3",
                      "--scene", str(tmp_path / "scene"), "--cache", str(tmp_path / "cache"),
                      "--out", str(out)]) == 0
-    rows = list(csv.DictReader((out / "train-curve.csv").open()))
+    rows = csv_rows(out / "train-curve.csv")
     assert [(r["preset"], r["seed"], r["step"]) for r in rows] == \
         [(p, "3", s) for p in ("tiny", "cpu") for s in "012"]
     assert rows[1]["train_psnr"] == "" and rows[0]["train_psnr"] == "12.0000"
@@ -86,7 +91,7 @@ def test_option_values_seeds_downscale_and_stride_reach_every_curve(tmp_path, mo
                      "--out", str(out)]) == 0
     assert calls == [("tiny", {"engine": e}, s, 2, 3, 4, 50) for s in (0, 1)
                      for e in ("torch", "fast")]
-    rows = list(csv.DictReader((out / "train-curve.csv").open()))
+    rows = csv_rows(out / "train-curve.csv")
     assert [(r["option"], r["seed"]) for r in rows][::2] == \
         [("engine=torch", "0"), ("engine=fast", "0"), ("engine=torch", "1"), ("engine=fast", "1")]
     text = capsys.readouterr().out
@@ -173,7 +178,7 @@ def test_tiny_curve_measures_the_deployed_model_without_changing_training(tmp_pa
     assert [len(c) for c in calls] == [1, 2, 3] and calls[-1] == points
     meta = {"scene": "small", "device": "cpu", "git_revision": "test", "date": "today"}
     train_curve.write_curve(tmp_path / "out", points, meta)
-    rows = list(csv.DictReader((tmp_path / "out" / "train-curve.csv").open()))
+    rows = csv_rows(tmp_path / "out" / "train-curve.csv")
     assert tuple(rows[0]) == train_curve.COLUMNS
     assert [int(r["step"]) for r in rows] == train_curve.eval_steps(20, 10) == [0, 10, 19]
     seconds = [float(r["train_seconds"]) for r in rows]
@@ -182,7 +187,8 @@ def test_tiny_curve_measures_the_deployed_model_without_changing_training(tmp_pa
     assert all(5.0 < float(r["test_psnr"]) < 60.0 for r in rows)
     assert (tmp_path / "out" / "train-curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     (run_dir,) = (cache / "curves").glob("*/run")
-    logged = [json.loads(line) for line in (run_dir / train_curve.POINTS_FILE).open()]
+    logged = [json.loads(line)
+              for line in (run_dir / train_curve.POINTS_FILE).read_text().splitlines()]
     assert [p["test_psnr"] for p in logged] == [p["test_psnr"] for p in points]
     tables = evaluate(bake_run(run_dir, tmp_path / "model.npz"), scene, use_G=True)
     assert points[-1]["test_psnr"] == pytest.approx(tables["mean"]["psnr"], abs=1e-6)

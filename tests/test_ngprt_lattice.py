@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 import torch
 
+from clrender import buildlog
 from clrender.ngprt import space, torch_ops as ops
 from clrender.ngprt.config import preset
 
@@ -180,7 +181,7 @@ def test_kernel_lattice_equals_reference(cl_platform):
         }
     }
     """
-    program = cl.Program(rt.context, source).build(options=opts)
+    program = buildlog.build(rt.context, source, opts)
     o, d = (np.concatenate(x) for x in zip(*ray_sets(n=64, seed=3).values()))
     n, m = len(o), 64
     table = _table(o, d)

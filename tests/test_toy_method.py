@@ -123,7 +123,8 @@ def test_a_one_row_bench_table_and_a_train_curve(toy, scene, tmp_path, capsys):
     md = (tmp_path / "out" / "toy-table.md").read_text()
     assert f"| sphere r=0.6 | {row['PSNR']:.2f} | n/a | {row['Hit']:.3f} | n/a |" in md
     assert bench_run.main(["train-curve", "--method", "toy", "--preset", "tiny"] + common) == 0
-    points = list(csv.DictReader((tmp_path / "out" / "train-curve.csv").open()))
+    points = list(csv.DictReader((tmp_path / "out" / "train-curve.csv").read_text()
+                                 .splitlines()))
     assert [int(p["step"]) for p in points] == [0, 5, 10, 15, 19]
     assert {p["method"] for p in points} == {"toy"} and points[-1]["teacher_test_psnr"] == ""
     final = float(points[-1]["test_psnr"])

@@ -18,7 +18,7 @@ import numpy as np
 import pyopencl as cl
 import torch
 
-from clrender import bakedfile
+from clrender import bakedfile, buildlog
 from clrender.camera import generate_rays
 from clrender.device import event_ms, get_runtime
 from clrender.contract import BenchSpec, MethodSpec, Option, Stat
@@ -79,8 +79,8 @@ class Renderer:
         ctx = self.runtime.context
         if ctx not in self._programs:
             # Correctly rounded sqrt: the hit test is then numpy's, bit for bit.
-            self._programs[ctx] = cl.Program(ctx, KERNEL.read_text()).build(
-                options=["-cl-fp32-correctly-rounded-divide-sqrt"])
+            self._programs[ctx] = buildlog.build(ctx, KERNEL.read_text(),
+                                                 ["-cl-fp32-correctly-rounded-divide-sqrt"])
         self.kernel = cl.Kernel(self._programs[ctx], "toy_render")
 
     def render(self, camera, background=None, stats: bool = False) -> dict:
