@@ -106,6 +106,7 @@ def test_capture_recovers_the_poses_of_photos(captured, photos):
     out, report = captured
     assert (report["given"], report["registered"], report["models"]) == (VIEWS, VIEWS, 1)
     assert report["matcher"] == "exhaustive" and report["points3D"] > 100
+    assert report["mapper"] == "global"       # auto: no silhouettes (opaque photos)
     assert report["camera"]["model"] == sfm.CAMERA_MODEL
     assert set(report["stages"]) == {"frames", "features", "matching", "mapping",
                                      "undistortion", "output"}
@@ -140,15 +141,42 @@ def test_capture_resumes_from_its_work_folder(captured, photos):
     assert redone["registered"] == VIEWS and (out / "images_2").is_dir()
 
 
-def test_global_mapping_recovers_the_poses_and_reuses_the_matches(captured, photos,
-                                                                    tmp_path):
+def test_incremental_mapping_recovers_the_poses_and_reuses_the_matches(captured, photos,
+                                                                         tmp_path):
     out, _ = captured
     shutil.copytree(out.with_name(out.name + ".work"), tmp_path / "data.work")
-    report = capture(photos[0], tmp_path / "data", bounded=True, mapper="global")
+    report = capture(photos[0], tmp_path / "data", bounded=True, mapper="incremental")
     assert all(report["stages"][s]["skipped"] for s in ("frames", "features", "matching"))
-    assert not report["stages"]["mapping"]["skipped"] and report["mapper"] == "global"
+    assert not report["stages"]["mapping"]["skipped"] and report["mapper"] == "incremental"
     assert report["registered"] == VIEWS
     assert_poses_recovered(tmp_path / "data", photos[1])
+
+
+def test_auto_mapper_is_incremental_for_silhouettes_else_global():
+    from clrender.capture.pipeline import choose_mapper
+
+    assert choose_mapper("auto", silhouettes=True) == "incremental"
+    assert choose_mapper("auto", silhouettes=False) == "global"
+    assert choose_mapper("global", silhouettes=True) == "global"
+    assert choose_mapper("incremental", silhouettes=False) == "incremental"
+
+
+def test_a_known_focal_length_is_the_prior_and_redoes_mapping(captured, photos, tmp_path):
+    out, _ = captured
+    focal = corner_views(1, SIZE)[2]
+    shutil.copytree(out.with_name(out.name + ".work"), tmp_path / "data.work")
+    report = capture(photos[0], tmp_path / "data", bounded=True, downscale=2, focal=focal)
+    assert all(report["stages"][s]["skipped"] for s in ("frames", "features", "matching"))
+    assert not report["stages"]["mapping"]["skipped"]          # mapped with the other prior
+    database = sfm.pycolmap.Database.open(tmp_path / "data.work" / "mapping.db")
+    (camera,) = database.read_all_cameras()
+    database.close()
+    assert camera.has_prior_focal_length and camera.params[0] == focal
+    assert abs(report["camera"]["params"][0] / focal - 1) < 0.02   # refined, near it
+    assert report["registered"] == VIEWS
+    assert_poses_recovered(tmp_path / "data", photos[1])
+    with pytest.raises(ValueError, match="focal length -1.0: expected"):
+        capture(photos[0], tmp_path / "other", focal=-1.0)
 
 
 # -- video --------------------------------------------------------------------------------
@@ -320,6 +348,9 @@ def test_cli_prints_the_report_and_names_bad_input(captured, photos, tmp_path, c
     assert f"registered {VIEWS} of {VIEWS} images" in printed and "camera SIMPLE_RADIAL" in printed
     assert main(["capture", str(tmp_path / "nowhere"), "--out", str(tmp_path / "d")]) == 2
     assert "nowhere: no such folder or video" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["capture", str(photos[0]), "--out", str(tmp_path / "d"), "--focal", "0"])
+    assert "--focal: expected a number of pixels > 0, got '0'" in capsys.readouterr().err
 
 
 # -- object captures: cameras checked against the silhouettes -----------------------------
@@ -430,6 +461,7 @@ def test_a_refuted_camera_is_mapped_again_without_the_pairs_that_placed_it(
     rounds = report["refuted"]["rounds"]
     assert rounds[0]["cameras"] == {"IMG_003.png": 0.5} and rounds[0]["pairs_removed"] > 0
     assert report["registered"] == VIEWS - 1 and report["refuted"]["left_out"] == []
+    assert report["mapper"] == "incremental"  # auto: silhouettes, so the check follows it
 
 
 def test_a_camera_refuted_after_every_mapping_is_left_out(object_photos, tmp_path,

@@ -84,9 +84,10 @@ def _images(db: Path):
         database.close()
 
 
-def set_focal_prior(db: Path) -> None:
-    """Mark the focal length of every camera of ``db`` as a prior (COLMAP's guess from the
-    image size, 1.2 times its larger side, when the photos carry no EXIF focal length).
+def set_focal_prior(db: Path, focal: float | None = None) -> None:
+    """Mark the focal length of every camera of ``db`` as a prior: ``focal`` (pixels of
+    the frames), else the one extraction set (COLMAP's guess from the image size, 1.2 times
+    its larger side, when the photos carry no EXIF focal length).
 
     Without a prior, the mapper estimates the focal length anew with each image it
     registers (P4Pf, from that image's matches alone) and a weak registration can drag the
@@ -95,6 +96,8 @@ def set_focal_prior(db: Path) -> None:
     database = pycolmap.Database.open(db)
     try:
         for camera in database.read_all_cameras():
+            if focal is not None:
+                camera.focal_length = float(focal)
             camera.has_prior_focal_length = True
             database.update_camera(camera)
     finally:
