@@ -115,6 +115,41 @@ def test_capture_recovers_the_poses_of_photos(captured, photos):
     assert {c.model.name for c in cameras.values()} == {"PINHOLE"} and len(cameras) == 1
 
 
+def psnr(a, b):
+    return -10 * np.log10(np.mean((a.astype(float) / 255 - b.astype(float) / 255) ** 2))
+
+
+def test_undistortion_keeps_the_photos_grid_when_the_lens_barely_distorts(captured, photos):
+    out, report = captured
+    params = report["camera"]["params"]          # the mapped SIMPLE_RADIAL camera
+    lens = sfm.pycolmap.Camera(model=sfm.CAMERA_MODEL, width=SIZE, height=SIZE, params=params)
+    assert sfm.border_displacement(lens) <= sfm.KEEP_GRID_PX   # a pinhole render
+    cameras, images = read_model(out / "sparse" / "0")
+    (camera,) = cameras.values()
+    assert (camera.width, camera.height) == (SIZE, SIZE)          # not cropped
+    assert list(camera.params[2:]) == [params[1], params[2]]       # nor recentred
+    for name, _, _ in images[:3]:     # near the identity (the border moved by 0.66 px)
+        assert psnr(iio.imread(out / "images" / name), iio.imread(photos[0] / name)) > 33
+
+
+def test_undistortion_crops_a_distorting_lens_to_its_valid_region(tmp_path):
+    size, k = (64, 48), -0.05
+    lens = sfm.pycolmap.Camera(model=sfm.CAMERA_MODEL, width=size[0], height=size[1],
+                               camera_id=1, params=[50.0, size[0] / 2, size[1] / 2, k])
+    assert sfm.border_displacement(lens) > sfm.KEEP_GRID_PX
+    rec = sfm.pycolmap.Reconstruction()
+    rec.add_camera_with_trivial_rig(lens)
+    rec.add_image_with_trivial_frame(sfm.pycolmap.Image(name="a.png", camera_id=1, image_id=1),
+                                     sfm.pycolmap.Rigid3d())
+    (tmp_path / "model").mkdir()
+    rec.write(str(tmp_path / "model"))
+    noise_photos(tmp_path / "frames", 1, size=size[::-1])
+    (tmp_path / "frames" / "IMG_000.png").rename(tmp_path / "frames" / "a.png")
+    sfm.undistort(tmp_path / "model", tmp_path / "frames", tmp_path / "out", threads=1)
+    (camera,) = sfm.read_model(tmp_path / "out" / "sparse").cameras.values()
+    assert camera.model.name == "PINHOLE" and (camera.width, camera.height) != size  # cropped
+
+
 def test_capture_is_a_dataset_the_loader_reads_bounded(captured):
     out, _ = captured
     train, test = load_dataset(out, "train"), load_dataset(out, "test")
