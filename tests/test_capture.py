@@ -308,7 +308,7 @@ def test_disconnected_models_keep_the_largest_and_say_so(tmp_path, monkeypatch, 
 
     def two_models(db, images, out, threads, seed=0, mapper="incremental"):
         shutil.copytree(out.parent / "frames", out / "1")   # stands in for model folders
-        return {0: Model(3), 1: Model(7)}
+        return {0: Model(3), 1: Model(7), 2: Model(2)}   # 2: too small, discarded
 
     monkeypatch.setattr(sfm, "reconstruct", two_models)
     monkeypatch.setattr(sfm, "undistort", lambda *a: (_ for _ in ()).throw(

@@ -240,7 +240,8 @@ def _mapping(work: Path, threads: int, seed: int, given: int, masks: Path | None
             dropped = sorted(bad)
             _deregister(found[chosen], bad, work / "sparse" / str(chosen))
             break
-    models = {k: sfm.model_summary(r) for k, r in found.items()}
+    models = {k: sfm.model_summary(r) for k, r in found.items()     # COLMAP discards
+              if r.num_reg_images() >= sfm.MIN_MODEL_SIZE}           # smaller ones
     left_out = given - models[chosen]["registered"]
     if len(models) > 1:
         print(f"clrender capture: warning: {len(models)} disconnected models; kept the "
