@@ -61,11 +61,22 @@ def _cmd_capture(args) -> int:
 
     report = capture(args.src, args.out, max_frames=args.frames, matcher=args.matcher,
                      bounded=args.bounded, downscale=args.downscale, force=args.force,
-                     threads=args.threads, mapper=args.mapper)
+                     threads=args.threads, mapper=args.mapper, focal=args.focal)
     print(format_report(report))
     print(f"wrote {args.out} (train with: clrender train {args.out} --out RUN"
           f"{f' --downscale {args.downscale}' if args.downscale else ''})")
     return 0
+
+
+def _pixels(text: str) -> float:
+    """An argparse type: a length in pixels > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = 0.0
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a number of pixels > 0, got {text!r}")
+    return value
 
 
 def _add_downscale(parser, default, help_default: str) -> None:
@@ -188,10 +199,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a video's frames to keep, the sharpest of each window (default 200)")
     s.add_argument("--matcher", default="auto", choices=["auto", "exhaustive", "sequential"],
                    help="auto: exhaustive for up to 300 photos, else sequential (video too)")
-    s.add_argument("--mapper", default="incremental", choices=["incremental", "global"],
+    s.add_argument("--mapper", default="auto", choices=["auto", "incremental", "global"],
                    help="incremental (COLMAP's, registers one image at a time) or global "
                         "(GLOMAP's: all rotations, then all positions; no drift round an "
-                        "orbit, see docs/capture.md)")
+                        "orbit); auto (default): incremental for an object on a transparent "
+                        "background (its cameras then checked against the silhouettes), "
+                        "else global (see docs/capture.md)")
+    s.add_argument("--focal", type=_pixels, default=None, metavar="PX",
+                   help="the photos' focal length in pixels, if known: the mapping's prior "
+                        "(default: EXIF, else 1.2 times the larger image side, refined)")
     s.add_argument("--bounded", action=argparse.BooleanOptionalAction, default=None,
                    help="an object capture, scaled into [-1, 1]^3 (default: when every "
                         "photo has a transparent background)")

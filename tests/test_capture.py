@@ -106,12 +106,48 @@ def test_capture_recovers_the_poses_of_photos(captured, photos):
     out, report = captured
     assert (report["given"], report["registered"], report["models"]) == (VIEWS, VIEWS, 1)
     assert report["matcher"] == "exhaustive" and report["points3D"] > 100
+    assert report["mapper"] == "global"       # auto: no silhouettes (opaque photos)
     assert report["camera"]["model"] == sfm.CAMERA_MODEL
     assert set(report["stages"]) == {"frames", "features", "matching", "mapping",
                                      "undistortion", "output"}
     assert_poses_recovered(out, photos[1])
     cameras, _ = read_model(out / "sparse" / "0")
     assert {c.model.name for c in cameras.values()} == {"PINHOLE"} and len(cameras) == 1
+
+
+def psnr(a, b):
+    return -10 * np.log10(np.mean((a.astype(float) / 255 - b.astype(float) / 255) ** 2))
+
+
+def test_undistortion_keeps_the_photos_grid_when_the_lens_barely_distorts(captured, photos):
+    out, report = captured
+    params = report["camera"]["params"]          # the mapped SIMPLE_RADIAL camera
+    lens = sfm.pycolmap.Camera(model=sfm.CAMERA_MODEL, width=SIZE, height=SIZE, params=params)
+    assert sfm.border_displacement(lens) <= sfm.KEEP_GRID_PX   # a pinhole render
+    cameras, images = read_model(out / "sparse" / "0")
+    (camera,) = cameras.values()
+    assert (camera.width, camera.height) == (SIZE, SIZE)          # not cropped
+    assert list(camera.params[2:]) == [params[1], params[2]]       # nor recentred
+    for name, _, _ in images[:3]:     # near the identity (the border moved by 0.66 px)
+        assert psnr(iio.imread(out / "images" / name), iio.imread(photos[0] / name)) > 33
+
+
+def test_undistortion_crops_a_distorting_lens_to_its_valid_region(tmp_path):
+    size, k = (64, 48), -0.05
+    lens = sfm.pycolmap.Camera(model=sfm.CAMERA_MODEL, width=size[0], height=size[1],
+                               camera_id=1, params=[50.0, size[0] / 2, size[1] / 2, k])
+    assert sfm.border_displacement(lens) > sfm.KEEP_GRID_PX
+    rec = sfm.pycolmap.Reconstruction()
+    rec.add_camera_with_trivial_rig(lens)
+    rec.add_image_with_trivial_frame(sfm.pycolmap.Image(name="a.png", camera_id=1, image_id=1),
+                                     sfm.pycolmap.Rigid3d())
+    (tmp_path / "model").mkdir()
+    rec.write(str(tmp_path / "model"))
+    noise_photos(tmp_path / "frames", 1, size=size[::-1])
+    (tmp_path / "frames" / "IMG_000.png").rename(tmp_path / "frames" / "a.png")
+    sfm.undistort(tmp_path / "model", tmp_path / "frames", tmp_path / "out", threads=1)
+    (camera,) = sfm.read_model(tmp_path / "out" / "sparse").cameras.values()
+    assert camera.model.name == "PINHOLE" and (camera.width, camera.height) != size  # cropped
 
 
 def test_capture_is_a_dataset_the_loader_reads_bounded(captured):
@@ -140,15 +176,42 @@ def test_capture_resumes_from_its_work_folder(captured, photos):
     assert redone["registered"] == VIEWS and (out / "images_2").is_dir()
 
 
-def test_global_mapping_recovers_the_poses_and_reuses_the_matches(captured, photos,
-                                                                    tmp_path):
+def test_incremental_mapping_recovers_the_poses_and_reuses_the_matches(captured, photos,
+                                                                         tmp_path):
     out, _ = captured
     shutil.copytree(out.with_name(out.name + ".work"), tmp_path / "data.work")
-    report = capture(photos[0], tmp_path / "data", bounded=True, mapper="global")
+    report = capture(photos[0], tmp_path / "data", bounded=True, mapper="incremental")
     assert all(report["stages"][s]["skipped"] for s in ("frames", "features", "matching"))
-    assert not report["stages"]["mapping"]["skipped"] and report["mapper"] == "global"
+    assert not report["stages"]["mapping"]["skipped"] and report["mapper"] == "incremental"
     assert report["registered"] == VIEWS
     assert_poses_recovered(tmp_path / "data", photos[1])
+
+
+def test_auto_mapper_is_incremental_for_silhouettes_else_global():
+    from clrender.capture.pipeline import choose_mapper
+
+    assert choose_mapper("auto", silhouettes=True) == "incremental"
+    assert choose_mapper("auto", silhouettes=False) == "global"
+    assert choose_mapper("global", silhouettes=True) == "global"
+    assert choose_mapper("incremental", silhouettes=False) == "incremental"
+
+
+def test_a_known_focal_length_is_the_prior_and_redoes_mapping(captured, photos, tmp_path):
+    out, _ = captured
+    focal = corner_views(1, SIZE)[2]
+    shutil.copytree(out.with_name(out.name + ".work"), tmp_path / "data.work")
+    report = capture(photos[0], tmp_path / "data", bounded=True, downscale=2, focal=focal)
+    assert all(report["stages"][s]["skipped"] for s in ("frames", "features", "matching"))
+    assert not report["stages"]["mapping"]["skipped"]          # mapped with the other prior
+    database = sfm.pycolmap.Database.open(tmp_path / "data.work" / "mapping.db")
+    (camera,) = database.read_all_cameras()
+    database.close()
+    assert camera.has_prior_focal_length and camera.params[0] == focal
+    assert abs(report["camera"]["params"][0] / focal - 1) < 0.02   # refined, near it
+    assert report["registered"] == VIEWS
+    assert_poses_recovered(tmp_path / "data", photos[1])
+    with pytest.raises(ValueError, match="focal length -1.0: expected"):
+        capture(photos[0], tmp_path / "other", focal=-1.0)
 
 
 # -- video --------------------------------------------------------------------------------
@@ -245,7 +308,7 @@ def test_disconnected_models_keep_the_largest_and_say_so(tmp_path, monkeypatch, 
 
     def two_models(db, images, out, threads, seed=0, mapper="incremental"):
         shutil.copytree(out.parent / "frames", out / "1")   # stands in for model folders
-        return {0: Model(3), 1: Model(7)}
+        return {0: Model(3), 1: Model(7), 2: Model(2)}   # 2: too small, discarded
 
     monkeypatch.setattr(sfm, "reconstruct", two_models)
     monkeypatch.setattr(sfm, "undistort", lambda *a: (_ for _ in ()).throw(
@@ -320,6 +383,9 @@ def test_cli_prints_the_report_and_names_bad_input(captured, photos, tmp_path, c
     assert f"registered {VIEWS} of {VIEWS} images" in printed and "camera SIMPLE_RADIAL" in printed
     assert main(["capture", str(tmp_path / "nowhere"), "--out", str(tmp_path / "d")]) == 2
     assert "nowhere: no such folder or video" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["capture", str(photos[0]), "--out", str(tmp_path / "d"), "--focal", "0"])
+    assert "--focal: expected a number of pixels > 0, got '0'" in capsys.readouterr().err
 
 
 # -- object captures: cameras checked against the silhouettes -----------------------------
@@ -430,6 +496,7 @@ def test_a_refuted_camera_is_mapped_again_without_the_pairs_that_placed_it(
     rounds = report["refuted"]["rounds"]
     assert rounds[0]["cameras"] == {"IMG_003.png": 0.5} and rounds[0]["pairs_removed"] > 0
     assert report["registered"] == VIEWS - 1 and report["refuted"]["left_out"] == []
+    assert report["mapper"] == "incremental"  # auto: silhouettes, so the check follows it
 
 
 def test_a_camera_refuted_after_every_mapping_is_left_out(object_photos, tmp_path,

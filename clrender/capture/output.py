@@ -97,7 +97,9 @@ def format_report(report: dict) -> str:
     camera = report.get("camera")
     if camera:      # a focal length far from the photos' field of view flags a bad model
         lines.append(f"camera {camera['model']} {camera['width']}x{camera['height']}, "
-                     f"parameters {', '.join(f'{p:.4g}' for p in camera['params'])}")
+                     f"parameters {', '.join(f'{p:.4g}' for p in camera['params'])}"
+                     + (f" (from the focal prior {report['focal_prior']:.4g} px)"
+                        if report.get("focal_prior") else ""))
     refuted = report.get("refuted") or {"rounds": [], "left_out": []}
     for i, check in enumerate(refuted["rounds"]):
         lines.append(f"mapping {i + 1}: {len(check['cameras'])} cameras see the object's "

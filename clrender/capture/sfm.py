@@ -12,6 +12,7 @@ import itertools
 import zlib  # noqa: F401  loaded before pycolmap: its own zlib symbols break PNG writing
 from pathlib import Path
 
+import numpy as np
 import pycolmap
 from tqdm import tqdm
 
@@ -20,6 +21,7 @@ EXTRACT_CHUNK = 8                # images per extraction call (the progress bar'
 MATCH_BLOCK = 500                # image pairs per matching call (the progress bar's step)
 LOG_LEVEL = 1                    # COLMAP's warnings and errors; the stages report progress
 MIN_MODEL_SIZE = 3               # COLMAP drops smaller models; its 10 drops small captures
+KEEP_GRID_PX = 1.0               # undistortion that moves the border less keeps the photo's grid
 
 pycolmap.logging.minloglevel = max(pycolmap.logging.minloglevel, LOG_LEVEL)
 
@@ -84,9 +86,10 @@ def _images(db: Path):
         database.close()
 
 
-def set_focal_prior(db: Path) -> None:
-    """Mark the focal length of every camera of ``db`` as a prior (COLMAP's guess from the
-    image size, 1.2 times its larger side, when the photos carry no EXIF focal length).
+def set_focal_prior(db: Path, focal: float | None = None) -> None:
+    """Mark the focal length of every camera of ``db`` as a prior: ``focal`` (pixels of
+    the frames), else the one extraction set (COLMAP's guess from the image size, 1.2 times
+    its larger side, when the photos carry no EXIF focal length).
 
     Without a prior, the mapper estimates the focal length anew with each image it
     registers (P4Pf, from that image's matches alone) and a weak registration can drag the
@@ -95,6 +98,8 @@ def set_focal_prior(db: Path) -> None:
     database = pycolmap.Database.open(db)
     try:
         for camera in database.read_all_cameras():
+            if focal is not None:
+                camera.focal_length = float(focal)
             camera.has_prior_focal_length = True
             database.update_camera(camera)
     finally:
@@ -139,10 +144,37 @@ def model_summary(rec) -> dict:
 
 def undistort(model: Path, images: Path, out: Path, threads: int) -> None:
     """Undistort the registered images of ``model`` to PINHOLE into ``out``:
-    ``out/images/`` and the model in ``out/sparse/``."""
+    ``out/images/`` and the model in ``out/sparse/``.
+
+    COLMAP's undistorter crops the image to its valid region and puts the principal point
+    at the new centre, which for a lens with little distortion leaves the image a pixel
+    smaller, its grid shifted by half a pixel from the photo's: every pixel becomes the
+    mean of four (bilinear interpolation), a blur that costs a model trained on them its
+    detail. A camera whose distortion moves no pixel of the image's border by more than
+    KEEP_GRID_PX keeps the photo's size and principal point (scale 1: near the identity;
+    barrel distortion, the usual one, samples nothing outside the photo then, pincushion
+    at most a sliver that thin at the corners)."""
+    options = pycolmap.UndistortCameraOptions()
+    cameras = read_model(model).cameras.values()
+    if max(border_displacement(c) for c in cameras) <= KEEP_GRID_PX:
+        options.min_scale = options.max_scale = 1.0
     with tqdm(total=1, desc="undistortion", unit="model", disable=None) as bar:
-        pycolmap.undistort_images(out, model, images, num_threads=threads)
+        pycolmap.undistort_images(out, model, images, undistort_options=options,
+                                  num_threads=threads)
         bar.update()
+
+
+def border_displacement(camera) -> float:
+    """The largest distance in pixels between a point of the image's border (corners and
+    edge midpoints) and where a pinhole camera of the same focal length and principal
+    point sees it: how far undistortion moves the border."""
+    w, h = camera.width, camera.height
+    pixels = np.array([[u, v] for u in (0, w / 2, w) for v in (0, h / 2, h)], float)
+    rays = np.asarray(camera.cam_from_img(pixels))
+    fx, fy = camera.focal_length_x, camera.focal_length_y
+    cx, cy = camera.principal_point_x, camera.principal_point_y
+    pinhole = np.stack([fx * rays[:, 0] + cx, fy * rays[:, 1] + cy], axis=1)
+    return float(np.linalg.norm(pinhole - pixels, axis=1).max())
 
 
 def read_model(folder: Path):
