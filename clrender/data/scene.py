@@ -90,29 +90,22 @@ def make_scene(kind: str, out_dir, seed: int = 0, n_train: int = 100, n_test: in
         for split, poses in views.items():
             (out / split).mkdir(parents=True, exist_ok=True)
             cams = [Camera.from_fov(fov, width, height, c2w) for c2w in poses]
-            _write_split(out, split, kind, pool.map(partial(_render, scene), cams), poses,
-                         fov, width, height, seed, bar)
+            frames = []
+            for i, (rgba, c2w) in enumerate(zip(pool.map(partial(_render, scene), cams), poses)):
+                img = rgba if kind == "bounded" else rgba[..., :3]
+                atomic_write(out / split / f"r_{i:03d}.png",
+                             lambda f, img=img: iio.imwrite(f, img, extension=".png"))
+                frames.append({"file_path": f"./{split}/r_{i:03d}",
+                               "transform_matrix": np.round(c2w, 12).tolist()})
+                bar.update()
+            meta = {"camera_angle_x": float(fov), "w": width, "h": height, "frames": frames,
+                    "clrender": scene_key(kind, seed)}
+            text = json.dumps(meta, indent=2)
+            for name in (split, "val") if split == "test" else (split,):
+                atomic_write(out / f"transforms_{name}.json",
+                             lambda f, t=text: Path(f).write_text(t))
     bar.close()
     return out
-
-
-def _write_split(out: Path, split: str, kind: str, images, poses, fov: float, width: int,
-                 height: int, seed: int, bar) -> None:
-    """Write one split's images (``images``: (H, W, 4) uint8 each, in pose order) and its
-    ``transforms_<split>.json`` (the test split's also as ``transforms_val.json``)."""
-    frames = []
-    for i, (rgba, c2w) in enumerate(zip(images, poses)):
-        img = rgba if kind == "bounded" else rgba[..., :3]
-        atomic_write(out / split / f"r_{i:03d}.png",
-                     lambda f, img=img: iio.imwrite(f, img, extension=".png"))
-        frames.append({"file_path": f"./{split}/r_{i:03d}",
-                       "transform_matrix": np.round(c2w, 12).tolist()})
-        bar.update()
-    meta = {"camera_angle_x": float(fov), "w": width, "h": height, "frames": frames,
-            "clrender": scene_key(kind, seed)}
-    text = json.dumps(meta, indent=2)
-    for name in (split, "val") if split == "test" else (split,):
-        atomic_write(out / f"transforms_{name}.json", lambda f, t=text: Path(f).write_text(t))
 
 
 def scene_key(kind: str, seed: int) -> dict:
