@@ -102,9 +102,9 @@ def capture(src, out, max_frames: int = 200, matcher: str = "auto", bounded=None
                     "matcher": "sequential" if sequential else "exhaustive"}))
     masks = work / "masks" if info.get("transparent") else None
     mapper = choose_mapper(mapper, masks is not None)
-    if (work / "mapping.json").is_file() and (
-            run.info("mapping").get("mapper", "incremental"),
-            run.info("mapping").get("focal")) != (mapper, focal):
+    mapped_as = run.info("mapping") if (work / "mapping.json").is_file() else None
+    if mapped_as is not None and (mapped_as.get("mapper", "incremental"),
+                                  mapped_as.get("focal")) != (mapper, focal):
         for stage in ("mapping", "undistortion"):
             (work / f"{stage}.json").unlink(missing_ok=True)
         shutil.rmtree(work / "undistorted", ignore_errors=True)
