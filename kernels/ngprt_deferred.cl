@@ -21,7 +21,12 @@
  * params: [w0 (23, 64), b0 (64), w1 (64, 64), b1 (64), w2 (64, 3), b2 (3)] float32, in
  * __constant memory with -D DEFERRED_CONSTANT=1 (the host sets it where the device's
  * constant buffer holds them: every work-item reads the same weight at once, which a GPU's
- * constant cache broadcasts), else __global.
+ * constant cache broadcasts), else __global; with -D DEFERRED_LOCAL=1 (a GPU variant,
+ * render_cl.Tuning) the work-group first copies them from there into the __local
+ * argument `staged` and reads them from it.
+ * -D DEFERRED_STREAMED=1 (a GPU variant): each output of the second hidden layer goes
+ * straight into the output layer's sums, in the same order, so the 64 of h2 are never
+ * held at once (fewer live registers a work-item; the same values).
  */
 #include "camera.h"
 #include "ngprt_math.h"
@@ -32,14 +37,21 @@
 #endif
 
 #if !defined(FEATURES) || !defined(SH_DIM) || !defined(DEFERRED_HIDDEN) || \
-    !defined(DEFERRED_VEC) || !defined(DEFERRED_CONSTANT) || !defined(FAST_MATH)
+    !defined(DEFERRED_VEC) || !defined(DEFERRED_CONSTANT) || !defined(DEFERRED_LOCAL) || \
+    !defined(DEFERRED_STREAMED) || !defined(FAST_MATH)
 #error "ngprt_deferred.cl needs -D FEATURES SH_DIM DEFERRED_HIDDEN DEFERRED_VEC \
-    DEFERRED_CONSTANT FAST_MATH"
+    DEFERRED_CONSTANT DEFERRED_LOCAL DEFERRED_STREAMED FAST_MATH"
 #endif
+/* PARAMS: where the weights arrive; WEIGHT: where the MLP reads them. */
 #if DEFERRED_CONSTANT
-#define WEIGHT __constant const float
+#define PARAMS __constant const float
 #else
-#define WEIGHT __global const float
+#define PARAMS __global const float
+#endif
+#if DEFERRED_LOCAL
+#define WEIGHT __local const float
+#else
+#define WEIGHT PARAMS
 #endif
 /* The code's shape fixes these: the march writes 7 features + opacity per pixel, sh4
  * spells out degree 4, the hidden layers run four outputs per pass. */
@@ -62,6 +74,7 @@
 #define P_B1 (P_W1 + HID * HID)
 #define P_W2 (P_B1 + HID)
 #define P_B2 (P_W2 + HID * 3)
+#define N_PARAMS (P_B2 + 3)
 
 #if DEFERRED_VEC == 1
 typedef float vfloat;
@@ -131,6 +144,33 @@ inline void dense_relu(const vfloat *in, int n_in, WEIGHT *w, WEIGHT *b, vfloat 
     }
 }
 
+#if DEFERRED_STREAMED
+/* The second hidden layer (dense_relu of h1) fed straight into the output layer:
+ * o[c] += relu(h1 @ w1 + b1)[j] * w2[3 j + c] for j = 0 .. HID-1 in order, as the
+ * output loop of ngprt_deferred adds them. */
+inline void dense_relu_output(const vfloat *in, WEIGHT *w, WEIGHT *b, WEIGHT *w2,
+                              vfloat *o0, vfloat *o1, vfloat *o2)
+{
+    for (int j = 0; j < HID; j += 4) {
+        vfloat a[4] = {(vfloat)(0.0f), (vfloat)(0.0f), (vfloat)(0.0f), (vfloat)(0.0f)};
+        for (int i = 0; i < HID; ++i) {
+            const vfloat x = in[i];
+            WEIGHT *wi = w + i * HID + j;
+            a[0] = a[0] + x * wi[0];
+            a[1] = a[1] + x * wi[1];
+            a[2] = a[2] + x * wi[2];
+            a[3] = a[3] + x * wi[3];
+        }
+        for (int q = 0; q < 4; ++q) {
+            const vfloat h = relu(a[q] + b[j + q]);
+            *o0 = *o0 + h * w2[3 * (j + q)];
+            *o1 = *o1 + h * w2[3 * (j + q) + 1];
+            *o2 = *o2 + h * w2[3 * (j + q) + 2];
+        }
+    }
+}
+#endif
+
 /* Gathers the inputs x (IN lane-vectors) and the opacity of pixels p0 .. p0+VEC-1;
  * lanes past the image get zeros. */
 inline void load_inputs(__global const float *cam, int width, int n_pix, int p0,
@@ -159,10 +199,22 @@ inline void load_inputs(__global const float *cam, int width, int n_pix, int p0,
  * compiler keeps them (ngprt_march.cl says why). */
 __kernel __attribute__((vec_type_hint(vfloat)))
 void ngprt_deferred(__global const float *cam, const int width, const int n_pix,
-                    __global const float *feat, WEIGHT *params,
+                    __global const float *feat, PARAMS *weights,
                     const float bg_r, const float bg_g, const float bg_b,
-                    __global float *rgb)
+                    __global float *rgb
+#if DEFERRED_LOCAL
+                    , __local float *staged
+#endif
+                    )
 {
+#if DEFERRED_LOCAL
+    /* Every work-item of the group takes part before any returns. */
+    for (int i = get_local_id(0); i < N_PARAMS; i += get_local_size(0)) staged[i] = weights[i];
+    barrier(CLK_LOCAL_MEM_FENCE);
+    WEIGHT *params = staged;
+#else
+    WEIGHT *params = weights;
+#endif
     const int p0 = (int)get_global_id(0) * DEFERRED_VEC;
     if (p0 >= n_pix) return;
     bool covered = false;
@@ -177,17 +229,22 @@ void ngprt_deferred(__global const float *cam, const int width, const int n_pix,
         }
         return;
     }
-    vfloat x[IN], h1[HID], h2[HID], opacity;
+    vfloat x[IN], h1[HID], opacity;
     load_inputs(cam, width, n_pix, p0, feat, x, &opacity);
     dense_relu(x, IN, params + P_W0, params + P_B0, h1);
-    dense_relu(h1, HID, params + P_W1, params + P_B1, h2);
     WEIGHT *w2 = params + P_W2, *b2 = params + P_B2;
     vfloat o0 = 0.0f, o1 = 0.0f, o2 = 0.0f;
+#if DEFERRED_STREAMED
+    dense_relu_output(h1, params + P_W1, params + P_B1, w2, &o0, &o1, &o2);
+#else
+    vfloat h2[HID];
+    dense_relu(h1, HID, params + P_W1, params + P_B1, h2);
     for (int i = 0; i < HID; ++i) {
         o0 = o0 + h2[i] * w2[3 * i];
         o1 = o1 + h2[i] * w2[3 * i + 1];
         o2 = o2 + h2[i] * w2[3 * i + 2];
     }
+#endif
     const vfloat c0 = RECIP(1.0f + EXP(-(x[0] + o0 + b2[0])));
     const vfloat c1 = RECIP(1.0f + EXP(-(x[1] + o1 + b2[1])));
     const vfloat c2 = RECIP(1.0f + EXP(-(x[2] + o2 + b2[2])));

@@ -80,7 +80,7 @@ inline void fine_corners(const MarchPoint *p, vint *idx, vfloat *wt)
  * on nothing but the indices, so a CPU issues them back to back. inv_sig: the -inv
  * variants' attention weights (Model.inv_sig). */
 inline float8 features(int j, const vint *idx, const vfloat *wt,
-                       __global const float8 *blocks, __global const float8 *tables,
+                       __global const float8 *blocks, __global const table_t *tables,
                        __global const float *fusion, const float8 *inv_sig)
 {
     float8 coarse = (float8)(0.0f), sig[SIG_LEN];
@@ -100,7 +100,7 @@ inline float8 features(int j, const vint *idx, const vfloat *wt,
     for (int l = 0; l < L; ++l) {
         fl[l] = (float8)(0.0f);
         for (int c = 8 * (l + 1); c < 8 * (l + 2); ++c)
-            fl[l] = fl[l] + LANE_F(wt[c], j) * tables[LANE_I(idx[c], j)];
+            fl[l] = fl[l] + LANE_F(wt[c], j) * TABLE_ENTRY(tables, LANE_I(idx[c], j));
     }
     return coarse + fuse(fl, sig, fusion);
 }

@@ -134,7 +134,7 @@ void ngprt_march(__global const float *cam, const int width, const int height,
                  const float s, const float near, const float far,
                  __global const occ_t *occupancy, __global const uchar *G,
                  __global const int *block_index, __global const float8 *blocks,
-                 const int n_blocks, __global const float8 *tables,
+                 const int n_blocks, __global const table_t *tables,
                  __global const float *fusion,
                  __global float *feat, __global float *depth,
                  __global int *n_march_out, __global int *n_occ_out

@@ -9,7 +9,8 @@
  *     ModelConfig.occ_res, occ_shift), LOG2_T, COARSE_BLOCK, G_RES, N_ATT (attention channels in the
  *     coarse grid), N_INV (spatially invariant logits), VARIANT, UNBOUNDED, EXTENT
  *     (ModelConfig.extent), USE_G, G_IN_CODE (render_cl.g_in_codes), MARCH_PAPER (the
- *     paper's march, ngprt_paper.h, or ours), COUNT_READS (the counting build);
+ *     paper's march, ngprt_paper.h, or ours), COUNT_READS (the counting build),
+ *     HALF_TABLES (the fine tables in half precision);
  *   per device: RAYS (ngprt_lanes.h), FAST_MATH (ngprt_math.h); the skip's margins come
  *     with ngprt_skip.h.
  * A missing define fails the build: an undefined name is 0 in #if, which would
@@ -35,8 +36,9 @@
     !defined(UNBOUNDED) || !defined(EXTENT) || !defined(USE_G) || !defined(G_IN_CODE)
 #error "ngprt kernels need -D L L_C OCC_RES OCC_SHIFT LOG2_T COARSE_BLOCK G_RES N_ATT N_INV VARIANT UNBOUNDED EXTENT USE_G G_IN_CODE"
 #endif
-#if !defined(MARCH_PAPER) || !defined(COUNT_READS) || !defined(CODE_G_SHIFT)
-#error "ngprt kernels need -D MARCH_PAPER COUNT_READS CODE_G_SHIFT (render_cl.kernel_defines)"
+#if !defined(MARCH_PAPER) || !defined(COUNT_READS) || !defined(CODE_G_SHIFT) || \
+    !defined(HALF_TABLES)
+#error "ngprt kernels need -D MARCH_PAPER COUNT_READS CODE_G_SHIFT HALF_TABLES (render_cl.kernel_defines)"
 #endif
 /* An exit code (render_cl.exit_codes): 1 + its exit level (0: occupied) below
  * CODE_G_SHIFT, the G value read with it above. */
@@ -59,6 +61,16 @@ typedef ushort occ_t;
 #endif
 #if LATTICE_BREAKS != 14
 #error "LATTICE_BREAKS must be 14: the start, 12 candidate breakpoints, the end"
+#endif
+
+/* The fine hash tables' entries: float8, or (HALF_TABLES, render_cl.Tuning.half_tables)
+ * 8 halves read with vload_half8, half the bytes a corner. */
+#if HALF_TABLES
+typedef half table_t;
+#define TABLE_ENTRY(tables, i) vload_half8((i), (tables))
+#else
+typedef float8 table_t;
+#define TABLE_ENTRY(tables, i) ((tables)[i])
 #endif
 
 #define TABLE_MASK ((1u << LOG2_T) - 1u)
@@ -88,7 +100,7 @@ typedef struct {
     __global const int *block_index;   /* (L_C / COARSE_BLOCK)^3: block of a cell, -1 none */
     __global const float8 *blocks;     /* n_blocks * COARSE_CORNERS^3 corners, COARSE_STRIDE */
     int n_blocks;
-    __global const float8 *tables;     /* L * 2^LOG2_T: the fine hash tables */
+    __global const table_t *tables;    /* L * 2^LOG2_T entries: the fine hash tables */
     __global const float *fusion;      /* render_cl.fusion_params */
     float8 inv_sig[SIG_LEN];           /* -inv variants: sigmoid of the invariant logits */
 } Model;

@@ -7,7 +7,9 @@ Two rates, measured on the chosen device with kernels built here (fast build):
   size (the size of the model table being read: the occupancy mip, the sparse coarse
   grid, the fine hash tables), many independent reads in flight per work-item;
 * FLOP rate: independent ``a * b + c`` chains on ``float16`` values (2 FLOPs a lane),
-  the better of separate and fused multiply-add.
+  the better of separate and fused multiply-add;
+* stream rate: bytes read plus bytes written per second by a ``float8`` copy of a buffer
+  far larger than the device's caches (what a kernel's per-pixel inputs and outputs cost).
 
 Never asserts.
 """
@@ -46,6 +48,12 @@ __kernel void gather8(__global const float8 *table, const uint mask, const int n
     out[gid] = a.s0 + a.s1 + a.s2 + a.s3 + a.s4 + a.s5 + a.s6 + a.s7;
 }
 
+/* dst = src, one float8 a work-item and pass: 32 bytes read and 32 written. */
+__kernel void copy8(__global const float8 *src, __global float8 *dst)
+{
+    dst[get_global_id(0)] = src[get_global_id(0)];
+}
+
 /* FLOP_CHAINS independent a * b + c chains of float16 per work-item, contracted into
  * fused multiply-adds or not (CONTRACT). */
 #if !CONTRACT
@@ -75,7 +83,7 @@ def _program(runtime, streams: int = 1, contract: bool = False):
     opts = ["-cl-mad-enable", f"-DGATHER_STREAMS={streams}", f"-DFLOP_CHAINS={FLOP_CHAINS}",
             f"-DCONTRACT={int(contract)}"]
     prg = buildlog.build(runtime.context, SOURCE, opts)
-    return {"gather8": prg.gather8, "flops": prg.flops}
+    return {"gather8": prg.gather8, "flops": prg.flops, "copy8": prg.copy8}
 
 
 def _median_ms(run, repeats: int) -> float:
@@ -120,3 +128,21 @@ def flop_rate(device=None, repeats: int = 5, flops: float = 4e9) -> float:
                                        np.float32(0.999), np.float32(1e-3), out), repeats)
         best = max(best, gsize[0] * FLOP_CHAINS * 32 * n_iter / (ms * 1e-3))
     return best
+
+
+def stream_rate(device=None, repeats: int = 5, nbytes: int = 256 << 20) -> float:
+    """Bytes per second read and written by a ``float8`` copy of ``nbytes`` (read + write
+    counted: 2 * nbytes a pass), at most a quarter of the device's largest allocation."""
+    rt = get_runtime(device)
+    nbytes = min(nbytes, rt.device.max_mem_alloc_size // 4)
+    n = nbytes // F8_BYTES
+    mf = cl.mem_flags
+    src = cl.Buffer(rt.context, mf.READ_ONLY | mf.COPY_HOST_PTR,
+                    hostbuf=np.ones(n * 8, np.float32))
+    dst = cl.Buffer(rt.context, mf.WRITE_ONLY, n * F8_BYTES)
+    kernel = _program(rt)["copy8"]
+    local = work_group_size(kernel, rt.device, (n,))
+    if n % local[0]:
+        n -= n % local[0]              # whole work-groups: no item reads past the buffers
+    ms = _median_ms(lambda: kernel(rt.queue, (n,), local, src, dst), repeats)
+    return 2 * n * F8_BYTES / (ms * 1e-3)

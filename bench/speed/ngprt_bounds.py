@@ -15,7 +15,9 @@ at most 2x below a bound that overlaps them perfectly):
   coarse grid and 8 per fine level from the fine tables, and the FLOPs of the trilinear
   sums and the fusion (:func:`sample_flops`);
 * deferred MLP: the MLP's FLOPs per covered pixel (opacity > 0; the kernel writes the
-  background elsewhere).
+  background elsewhere);
+* both: the bytes a pixel streams (:data:`MARCH_PIXEL_BYTES`, :data:`DEFERRED_PIXEL_BYTES`)
+  at the measured stream rate.
 
 Never asserts; ``bench.speed.ngprt_kernels`` prints each kernel's time against its bound.
 """
@@ -27,10 +29,16 @@ import math
 
 import numpy as np
 
-from bench.speed.limits import F8_BYTES, flop_rate, gather_rate
+from bench.speed.limits import F8_BYTES, flop_rate, gather_rate, stream_rate
 from clrender.device import get_runtime
 from clrender.ngprt.config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM,
                                    preset)
+
+
+# Bytes a pixel streams: the march writes 8 features, depth and two counters; the deferred
+# MLP reads the 8 features and writes rgb.
+MARCH_PIXEL_BYTES = 4 * (FEATURES + 3)
+DEFERRED_PIXEL_BYTES = 4 * (FEATURES + 3)
 
 
 def table_bytes(model, march: str = "ours") -> dict:
@@ -49,11 +57,12 @@ def table_bytes(model, march: str = "ours") -> dict:
 
 def measure_limits(model, device=None, repeats: int = 5, march: str = "ours") -> dict:
     """Gather rates (per second) for each of the model's table sizes (:func:`table_bytes`
-    of ``march``) and the FLOP rate."""
+    of ``march``), the FLOP rate and the stream rate (bytes per second)."""
     sizes = table_bytes(model, march)
     rates = {name: gather_rate(max(nbytes, F8_BYTES), device, repeats)
              for name, nbytes in sizes.items()}
     return {"gathers_per_s": rates, "flops_per_s": flop_rate(device, repeats),
+            "stream_bytes_per_s": stream_rate(device, repeats),
             "table_bytes": sizes, "march": march, "device": get_runtime(device).name}
 
 
@@ -72,17 +81,26 @@ def sample_flops(config) -> int:
     return trilinear + fusion[config.variant] + compositing
 
 
-def march_bound(config, reads: dict, n_occ: float, limits: dict) -> dict:
+def _stream_s(pixels: float, per_pixel: int, limits: dict) -> float:
+    """Seconds to stream ``per_pixel`` bytes of ``pixels`` (0 where ``limits`` has no
+    stream rate: older result files)."""
+    rate = limits.get("stream_bytes_per_s")
+    return pixels * per_pixel / rate if rate else 0.0
+
+
+def march_bound(config, reads: dict, n_occ: float, limits: dict, pixels: float = 0.0) -> dict:
     """Bound (ms) of the march from its counters, totals over the frame: ``reads``
-    {``occupancy``, ``G``: reads the march counted (:mod:`clrender.ngprt.marches`)} and
-    ``n_occ`` samples; ``limits`` of :func:`measure_limits` for the same march."""
+    {``occupancy``, ``G``: reads the march counted (:mod:`clrender.ngprt.marches`)},
+    ``n_occ`` samples and the frame's ``pixels`` (their outputs streamed); ``limits`` of
+    :func:`measure_limits` for the same march."""
     g = limits["gathers_per_s"]
     coarse_chunks = 1 + math.ceil(config.n_attention / 8)
     gather_s = (reads["occupancy"] / g["occupancy"] + reads["G"] / g["G"]
                 + n_occ * 8 * coarse_chunks / g["coarse"] + n_occ * 8 * config.L / g["fine"])
     flop_s = n_occ * sample_flops(config) / limits["flops_per_s"]
-    return {"ms": 1e3 * (gather_s + flop_s), "gather_ms": 1e3 * gather_s,
-            "flop_ms": 1e3 * flop_s}
+    stream_s = _stream_s(pixels, MARCH_PIXEL_BYTES, limits)
+    return {"ms": 1e3 * (gather_s + flop_s + stream_s), "gather_ms": 1e3 * gather_s,
+            "flop_ms": 1e3 * flop_s, "stream_ms": 1e3 * stream_s}
 
 
 def deferred_flops() -> int:
@@ -91,10 +109,13 @@ def deferred_flops() -> int:
     return 2 * (n_in * h + h * h + h * 3) + 2 * h + 10
 
 
-def deferred_bound(covered: float, limits: dict) -> dict:
-    """Bound (ms) of the deferred MLP over ``covered`` pixels (opacity > 0)."""
+def deferred_bound(covered: float, limits: dict, pixels: float = 0.0) -> dict:
+    """Bound (ms) of the deferred MLP over ``covered`` pixels (opacity > 0) of a frame of
+    ``pixels`` (each streams its features in and its rgb out)."""
     flop_s = covered * deferred_flops() / limits["flops_per_s"]
-    return {"ms": 1e3 * flop_s, "gather_ms": 0.0, "flop_ms": 1e3 * flop_s}
+    stream_s = _stream_s(pixels, DEFERRED_PIXEL_BYTES, limits)
+    return {"ms": 1e3 * (flop_s + stream_s), "gather_ms": 0.0, "flop_ms": 1e3 * flop_s,
+            "stream_ms": 1e3 * stream_s}
 
 
 def main(argv=None) -> int:

@@ -38,7 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.speed.ngprt_bounds import deferred_bound, march_bound, measure_limits
+from bench.speed.ngprt_bounds import (MARCH_PIXEL_BYTES, deferred_bound, march_bound,
+                                      measure_limits)
 from bench.speed.sizes import at_size, parse_size, trained_test_set
 from clrender.atomic import write_atomic
 from clrender.cliopts import whole_number
@@ -109,8 +110,8 @@ def measure(model, cameras, use_G: bool, repeats: int, device=None, exact: bool 
         n = cameras[0].width * cameras[0].height
         row["bound"] = {
             "march": march_bound(model.config, {k: v * n for k, v in row["reads"].items()},
-                                 row["occupied"] * n, limits),
-            "deferred": deferred_bound(row["covered"] * n, limits)}
+                                 row["occupied"] * n, limits, n),
+            "deferred": deferred_bound(row["covered"] * n, limits, n)}
         for stage in ("march", "deferred"):
             row["bound"][stage]["ratio"] = row[stage]["median"] / row["bound"][stage]["ms"]
     return row
@@ -158,6 +159,12 @@ def _stage_cells(r: dict) -> list[str]:
     return cells
 
 
+def _stream_note(limits: dict) -> str:
+    rate = limits.get("stream_bytes_per_s")
+    return f"; streamed {rate / 1e9:.1f} GB/s, {MARCH_PIXEL_BYTES} bytes a pixel a stage" \
+        if rate else ""
+
+
 def bounds_note(meta: dict) -> str:
     """The sentence on the bounds and the rates measured in this run."""
     lim = meta["limits"]
@@ -165,8 +172,8 @@ def bounds_note(meta: dict) -> str:
                       for name, rate in lim["gathers_per_s"].items())
     note = (f"Bounds (bench/speed/ngprt_bounds.py): each stage's counters at the rates measured in this "
             f"run (random 32-byte gathers from tables of the model's sizes: {rates}; "
-            f"{lim['flops_per_s'] / 1e9:.0f} GFLOP/s), gathers and FLOPs not overlapped; "
-            f"ratio = time / bound.")
+            f"{lim['flops_per_s'] / 1e9:.0f} GFLOP/s{_stream_note(lim)}), gathers, FLOPs "
+            f"and streamed bytes not overlapped; ratio = time / bound.")
     if meta.get("baseline"):
         note += (f" Baseline: the kernels of `{meta['baseline']}`, rendered interleaved with "
                  f"these in the same run, the order swapped every repeat; vs baseline = the "

@@ -132,7 +132,7 @@ def bound_s(c: dict, rates: dict, backward: bool = False) -> float:
     return g + c["bytes"] * k / rates["stream_bytes_per_s"] + c["flops"] * k / rates["flops_per_s"]
 
 
-def stream_rate(nbytes: int = 1 << 27, repeats: int = 7) -> float:
+def torch_copy_rate(nbytes: int = 1 << 27, repeats: int = 7) -> float:
     """Bytes per second of a torch copy (read + write) of a ``nbytes`` float32 tensor, the
     best of ``repeats`` (a bound wants the machine's best)."""
     a = torch.rand(nbytes // 4)
@@ -151,7 +151,7 @@ def measure_rates(model: NGPRT, n_corners: int) -> dict:
              "aux": cfg.aux_levels * model.aux.T * cfg.aux_features * 4,
              "coarse": max(F8_BYTES, int(n_corners) * cfg.coarse_channels * 4)}
     return {"gathers_per_s": {k: gather_rate(v) for k, v in sizes.items()},
-            "flops_per_s": flop_rate(), "stream_bytes_per_s": stream_rate()}
+            "flops_per_s": flop_rate(), "stream_bytes_per_s": torch_copy_rate()}
 
 
 def _corner_count(model: NGPRT, t: _Trainer) -> tuple[float, float]:

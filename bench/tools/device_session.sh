@@ -1,16 +1,20 @@
 #!/bin/bash
 # One prepared session on a lent GPU machine that reaches no package registry (docs/gpu.md).
 #
-#   bash bench/tools/device_session.sh prepare [BONSAI_DIR]   # here: fills .gpu/ (~55 MB, git-ignored)
-#   bash bench/tools/device_session.sh run                    # there, as root, with .gpu carried
+#   bash bench/tools/device_session.sh prepare [BONSAI_DIR [NDRF_STUDENT LEGO_DIR]]   # here
+#   bash bench/tools/device_session.sh run      # there, as root, with .gpu carried
 #
-# prepare: Python 3.12 wheels of what the GPU image lacks, device_check's reference images
-# (made here with PoCL) and the bonsai LLFF folder (bench.tools.public_scenes). run: registers the
-# vendor's OpenCL driver (/etc/OpenCL/vendors), makes clrender importable from the tree
-# (its entry points, kernels/ as clrender.kernels), then device_check, the kernel = reference
-# tests on the GPU's platform, a `cpu-long` bonsai model trained with torch on CUDA and its
-# kernel times at 1920x1080, and the random-model kernel tables. ~5.5 min on an H200; logs
-# and results under $OUT.
+# prepare: fills .gpu/ (git-ignored; at most 60 MiB, the machine takes 64): Python 3.12
+# wheels of what the GPU image lacks, device_check's reference images (made here with
+# PoCL), the bonsai LLFF folder (bench.tools.public_scenes) and, given, a baked NDRF
+# student with its dataset's first 5 test frames (lego's transforms_test.json, cut).
+# run: registers the vendor's OpenCL driver (/etc/OpenCL/vendors), makes clrender
+# importable from the tree (its entry points, kernels/ as clrender.kernels), then
+# device_check, the kernel = reference tests on the GPU's platform (the GPU variants
+# included), a `cpu-long` bonsai model trained with torch on CUDA, its stages against their
+# bounds at 800x800 and 1920x1080 and every GPU variant paired against the default
+# (bench.speed.ngprt_variants), the NDRF student's stages at both sizes, and the
+# random-model kernel tables. Logs and results under $OUT (results.tgz: the JSON).
 set -u
 cd "$(dirname "$0")/../.."
 G=.gpu
@@ -18,7 +22,7 @@ WHEELS="pyopencl==2026.1.4 pytools==2026.1.1 platformdirs==4.14.9 siphash24==1.9
         embreex==4.4.0.post1 trimesh==5.2.0 fast-simplification==0.2.0 filelock==4.3.2"
 
 prepare() {
-    local bonsai=${1:-}
+    local bonsai=${1:-} student=${2:-} lego=${3:-}
     grep -qx "/$G/" .git/info/exclude 2>/dev/null || echo "/$G/" >> .git/info/exclude
     mkdir -p $G/whl $G/devcheck
     for w in $WHEELS; do
@@ -31,9 +35,26 @@ prepare() {
     .venv/bin/python -m bench.tools.device_check --make-reference "$tmp" || exit 1
     cp "$tmp"/reference.npz "$tmp"/reference.json "$tmp"/ndrf.npz $G/devcheck/ && rm -rf "$tmp"
     if [ -n "$bonsai" ]; then
-        mkdir -p $G/bonsai && cp -r "$bonsai"/images "$bonsai"/poses_bounds.npy $G/bonsai/
+        mkdir -p $G/bonsai && cp -rL "$bonsai"/images "$bonsai"/poses_bounds.npy $G/bonsai/
+    fi
+    if [ -n "$student" ]; then
+        mkdir -p $G/ndrf/lego && cp "$student" $G/ndrf/student.npz || exit 1
+        .venv/bin/python - "$lego" $G/ndrf/lego <<'EOF' || exit 1
+import json, shutil, sys
+from pathlib import Path
+src, dst = Path(sys.argv[1]), Path(sys.argv[2])
+test = json.loads((src / "transforms_test.json").read_text())
+test["frames"] = test["frames"][:5]            # the cameras timed there
+for frame in test["frames"]:
+    name = frame["file_path"] + ("" if Path(frame["file_path"]).suffix else ".png")
+    (dst / name).parent.mkdir(parents=True, exist_ok=True)
+    shutil.copy(src / name, dst / name)
+(dst / "transforms_test.json").write_text(json.dumps(test, indent=1))
+EOF
     fi
     du -sh --apparent-size $G
+    local kib; kib=$(du -sk --apparent-size $G | cut -f1)
+    [ "$kib" -le $((60 * 1024)) ] || { echo ".gpu/ is over 60 MiB: leave something out" >&2; exit 1; }
 }
 
 run() {
@@ -73,7 +94,8 @@ EOF
     step "kernel = reference tests on the GPU's platform"
     CLRENDER_TEST_PLATFORMS="nvidia=NVIDIA CUDA" timeout 150 python3 -m pytest -n 6 -q \
         -p no:cacheprovider -m "not oclgrind" -k "not pocl and not intel" --durations=10 -rfEs \
-        --junitxml=$R/kernel_tests.xml tests/test_render_cl.py tests/test_render_fast.py \
+        --junitxml=$R/kernel_tests.xml tests/test_render_cl.py tests/test_render_tuning.py \
+        tests/test_render_fast.py \
         tests/test_ngprt_unbounded.py tests/test_ngprt_holes.py tests/test_ngprt_lattice.py \
         tests/test_ndrf_raster.py tests/test_ndrf_shader.py tests/test_camera.py \
         tests/test_baked_fuzz.py tests/test_ndrf_baked_fuzz.py tests/test_frame_blocking.py
@@ -86,8 +108,15 @@ EOF
         tail -n 2 /tmp/bonsai/log.jsonl
         timeout 60 python3 -m clrender.cli bake /tmp/bonsai --out /tmp/bonsai.npz
         timeout 60 python3 -m clrender.cli eval /tmp/bonsai.npz $G/bonsai --downscale 2 | tee $R/bonsai_eval.json
-        timeout 60 python3 -m bench.speed.ngprt_kernels --model /tmp/bonsai.npz --data $G/bonsai \
-            --downscale 2 --sizes 1920x1080 --views 5 --repeats 5 --out $R
+        timeout 150 python3 -m bench.speed.ngprt_variants --model /tmp/bonsai.npz --data $G/bonsai \
+            --downscale 2 --sizes 800x800 1920x1080 --views 5 --repeats 5 --out $R
+        pack
+    fi
+
+    if [ -f $G/ndrf/student.npz ]; then
+        step "NDRF student: stages at 800x800 and 1920x1080"
+        timeout 90 python3 -m bench.speed.ndrf_kernels --model $G/ndrf/student.npz \
+            --data $G/ndrf/lego --repeats 5 --out $R
         pack
     fi
 
@@ -101,5 +130,6 @@ EOF
 case "${1:-}" in
     prepare) shift; prepare "$@" ;;
     run) run ;;
-    *) echo "usage: bash bench/tools/device_session.sh prepare [BONSAI_DIR] | run" >&2; exit 2 ;;
+    *) echo "usage: bash bench/tools/device_session.sh prepare [BONSAI_DIR [NDRF_STUDENT LEGO_DIR]] | run" >&2
+       exit 2 ;;
 esac

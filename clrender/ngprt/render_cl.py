@@ -17,6 +17,8 @@ References: NGP-RT (Hu et al., ECCV 2024) §4.3, S2.5.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pyopencl as cl
 
@@ -24,7 +26,7 @@ from ..camera import CAM_BYTES
 from ..device import device_type_name, event_ms, get_runtime, padded, work_group_size
 from .config import (DEFERRED_HIDDEN, FEATURES, FUSION_HIDDEN, N_MIP, SH_DIM, VARIANT_CODES,
                      kernel_constants)
-from .baked import upsampled
+from .baked import BakedModel, upsampled
 from .encoding import HASH_PRIMES
 from .marches import READ_KINDS, check_march, g_in_codes
 from .render_ref import BOX_MARGIN, CUBE, K_BACKOFF, K_PAST_END, REGION_SCALE
@@ -37,7 +39,56 @@ LANE_WIDTHS = (1, 2, 4, 8, 16)      # vector widths OpenCL C has
 DEFERRED_SHAPES = ((7 + SH_DIM, DEFERRED_HIDDEN), (DEFERRED_HIDDEN,),
                    (DEFERRED_HIDDEN, DEFERRED_HIDDEN), (DEFERRED_HIDDEN,),
                    (DEFERRED_HIDDEN, 3), (3,))
+DEFERRED_BYTES = 4 * sum(int(np.prod(shape)) for shape in DEFERRED_SHAPES)   # float32
 DEFERRED_CONSTANT_ARGS = 1          # __constant arguments of ngprt_deferred: its weights
+HALF_MAX = 65504.0                  # the largest finite float16
+
+
+@dataclass(frozen=True)
+class Tuning:
+    """Kernel variants for GPUs, all off by default (the renderer as the tests and tables
+    know it); bench/speed/ngprt_variants.py pairs each against the default.
+
+    Attributes:
+        half_tables: the fine hash tables in float16 (``-D HALF_TABLES``): half the bytes
+            a corner's gather. Not the default's values: such a build is held to the
+            reference of :func:`half_rounded`'s model.
+        march_tile: the march's work-group as (work-items in x, rows), e.g. (8, 8) so a
+            GPU's warp covers a 2D patch of rays; None: :func:`clrender.device.work_group_size`
+            (a run of one row).
+        deferred_local: the deferred MLP's weights copied into ``__local`` memory by each
+            work-group (``-D DEFERRED_LOCAL``).
+        deferred_streamed: the MLP's second hidden layer fed straight into the output layer
+            (``-D DEFERRED_STREAMED``; the same values, fewer live registers).
+    """
+
+    half_tables: bool = False
+    march_tile: tuple[int, int] | None = None
+    deferred_local: bool = False
+    deferred_streamed: bool = False
+
+    def __post_init__(self):
+        if self.march_tile is not None and (len(self.march_tile) != 2 or
+                                            min(self.march_tile) < 1):
+            raise ValueError(f"march_tile {self.march_tile!r}: expected two positive sizes")
+
+    @property
+    def name(self) -> str:
+        """A short label: the variants on, joined by '+' ('default' for none)."""
+        on = [*(["half-tables"] if self.half_tables else []),
+              *([f"tile-{self.march_tile[0]}x{self.march_tile[1]}"] if self.march_tile else []),
+              *(["deferred-local"] if self.deferred_local else []),
+              *(["deferred-streamed"] if self.deferred_streamed else [])]
+        return "+".join(on) or "default"
+
+
+def half_rounded(model: BakedModel) -> BakedModel:
+    """``model`` with its fine tables rounded to float16 and back: what a
+    ``Tuning(half_tables=True)`` build renders, for its reference."""
+    tables = np.asarray(model.arrays["fine_tables"], F32)
+    return BakedModel(model.config, model.gamma,
+                      {**model.arrays, "fine_tables": tables.astype(np.float16).astype(F32)},
+                      model.G_metric)
 
 
 def lane_width(device, cap: int = 16) -> int:
@@ -79,14 +130,14 @@ def deferred_in_constant(device) -> bool:
     ``__constant`` memory on ``device`` (``-D DEFERRED_CONSTANT``): they fit its
     CL_DEVICE_MAX_CONSTANT_BUFFER_SIZE and the kernel's constant arguments its
     CL_DEVICE_MAX_CONSTANT_ARGS."""
-    nbytes = 4 * sum(int(np.prod(shape)) for shape in DEFERRED_SHAPES)
-    return (nbytes <= device.max_constant_buffer_size
+    return (DEFERRED_BYTES <= device.max_constant_buffer_size
             and DEFERRED_CONSTANT_ARGS <= device.max_constant_args)
 
 
 def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1,
                    march: str = "ours", count_reads: bool = False,
-                   deferred_constant: bool = False) -> tuple[dict, dict]:
+                   deferred_constant: bool = False,
+                   tuning: Tuning = Tuning()) -> tuple[dict, dict]:
     """The ``-D`` defines of the march and deferred programs for a model config: the
     shared constants of :func:`clrender.ngprt.config.kernel_constants` and
     :func:`march_constants` (the kernels define none of their own) plus the model's
@@ -94,7 +145,8 @@ def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1,
     ``deferred_vec`` for the deferred MLP), the march (:mod:`clrender.ngprt.marches`),
     whether the march counts its reads (``COUNT_READS``, the counting build) and whether
     the deferred MLP reads its weights from ``__constant`` memory
-    (``DEFERRED_CONSTANT``: :func:`deferred_in_constant`)."""
+    (``DEFERRED_CONSTANT``: :func:`deferred_in_constant`), and the :class:`Tuning`
+    variants."""
     shared = kernel_constants()
     march = {
         **shared, **march_constants(), "L": config.L, "L_C": config.L_C,
@@ -105,9 +157,12 @@ def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1,
         "COARSE_BLOCK": config.coarse_block, "N_ATT": config.n_attention,
         "N_INV": config.n_inv_attention, "RAYS": rays, "G_IN_CODE": g_in_codes(config),
         "MARCH_PAPER": check_march(march) == "paper", "COUNT_READS": bool(count_reads),
+        "HALF_TABLES": tuning.half_tables,
     }
     return march, {**shared, "DEFERRED_VEC": deferred_vec,
-                   "DEFERRED_CONSTANT": bool(deferred_constant)}
+                   "DEFERRED_CONSTANT": bool(deferred_constant),
+                   "DEFERRED_LOCAL": tuning.deferred_local,
+                   "DEFERRED_STREAMED": tuning.deferred_streamed}
 
 
 def _packed(arrays: dict, names, shapes) -> np.ndarray:
@@ -200,21 +255,29 @@ class Renderer:
             (default :func:`lane_width` of the device).
         kernel_dir: build the kernels from this folder instead of the installed
             ``kernels/`` (``bench.speed.ngprt_kernels --baseline``: another version of them).
+        tuning: the GPU variants (:class:`Tuning`; default none).
     """
 
     def __init__(self, model, device=None, use_G: bool = True, exact: bool = False,
                  rays: int | None = None, deferred_vec: int | None = None,
-                 kernel_dir: str | None = None, march: str = "ours", count_reads: bool = False):
+                 kernel_dir: str | None = None, march: str = "ours", count_reads: bool = False,
+                 tuning: Tuning = Tuning()):
         self.model, self.config, self.use_G = model, model.config, bool(use_G)
+        self.tuning = tuning
         self.march_kind, self.count_reads = check_march(march), bool(count_reads)
         self.exact, self._kernel_dir = bool(exact), kernel_dir
         self.runtime = rt = get_runtime(device)
         self.rays = rays or lane_width(rt.device)
         self.deferred_vec = deferred_vec or lane_width(rt.device)
         self.deferred_constant = deferred_in_constant(rt.device)
+        if tuning.deferred_local and DEFERRED_BYTES > rt.device.local_mem_size:
+            raise ValueError(f"deferred_local: the MLP's {DEFERRED_BYTES} bytes of weights "
+                             f"exceed {rt.device.name}'s {rt.device.local_mem_size} bytes of "
+                             f"local memory")
         march_defs, deferred_defs = kernel_defines(self.config, self.use_G, self.deferred_vec,
                                                    self.rays, self.march_kind,
-                                                   deferred_constant=self.deferred_constant)
+                                                   deferred_constant=self.deferred_constant,
+                                                   tuning=tuning)
         self._march = rt.program("ngprt_march.cl", march_defs, exact,
                                  kernel_dir).kernel("ngprt_march")
         self._counting = None
@@ -241,9 +304,19 @@ class Renderer:
         once per kernel (:func:`clrender.device.work_group_size`)."""
         key = (name, global_size)
         if key not in self._local:
-            self._local[key] = work_group_size(kernel, self.runtime.device, global_size)
+            tile = self.tuning.march_tile if name in ("march", "count") else None
+            self._local[key] = (self._checked_tile(kernel, tile) if tile else
+                                work_group_size(kernel, self.runtime.device, global_size))
         local = self._local[key]
         return padded(global_size, local), local
+
+    def _checked_tile(self, kernel, tile: tuple[int, int]) -> tuple[int, int]:
+        limit = kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE,
+                                           self.runtime.device)
+        if tile[0] * tile[1] > limit:
+            raise ValueError(f"march_tile {tile}: {tile[0] * tile[1]} work-items, more than "
+                             f"the march kernel's {limit} on {self.runtime.device.name}")
+        return tuple(tile)
 
     def _buffer(self, array: np.ndarray) -> cl.Buffer:
         mf = cl.mem_flags
@@ -261,6 +334,11 @@ class Renderer:
         if tables.shape != (cfg.L, cfg.T, FEATURES):
             raise ValueError(f"baked model: fine_tables has shape {tables.shape}, "
                              f"expected (L={cfg.L}, T={cfg.T}, {FEATURES})")
+        if self.tuning.half_tables:
+            if np.abs(tables).max(initial=0.0) > HALF_MAX:
+                raise ValueError(f"baked model: fine_tables hold values beyond float16's "
+                                 f"range ({HALF_MAX:g}); render without half_tables")
+            tables = tables.astype(np.float16)
         for name, res in (("G", cfg.G_res), ("coarse_block_index", cfg.L_C // cfg.coarse_block)):
             if np.shape(arrays[name]) != (res,) * 3:
                 raise ValueError(f"baked model: {name} has shape {np.shape(arrays[name])}, "
@@ -306,7 +384,7 @@ class Renderer:
         """The counting build's march (``COUNT_READS``), built on first use."""
         if self._counting is None:
             defs, _ = kernel_defines(self.config, self.use_G, self.deferred_vec, self.rays,
-                                     self.march_kind, count_reads=True)
+                                     self.march_kind, count_reads=True, tuning=self.tuning)
             self._counting = self.runtime.program("ngprt_march.cl", defs, self.exact,
                                                   self._kernel_dir).kernel("ngprt_march")
         return self._counting
@@ -371,9 +449,11 @@ class Renderer:
         bg = [F32(c) for c in (background if background is not None else (1.0, 1.0, 1.0))]
         size = dict(self.launch_sizes(w, h))["ngprt_deferred"]
         gsize, local = self._launch("deferred", self._deferred, size)
+        staged = (cl.LocalMemory(self._bufs["deferred"].size),) if self.tuning.deferred_local \
+            else ()
         ev_deferred = self._deferred(self.runtime.queue, gsize, local,
                                      out["cam"], np.int32(w), np.int32(n), out["feat"],
-                                     self._bufs["deferred"], *bg, out["rgb"])
+                                     self._bufs["deferred"], *bg, out["rgb"], *staged)
         result = {"rgb": self._read(out["rgb"], (h, w, 3), F32)}
         if stats:
             result.update(
