@@ -372,6 +372,24 @@ def test_train_resume_and_bake(tmp_path, small_run_inputs, monkeypatch):
 
 
 @pytest.mark.slow
+def test_patch_covering_the_image_trains_on_full_frames(tmp_path, small_run_inputs):
+    # The `cpu` preset's 200x200 patch on the built-in scene's 200x200 frames: the full-frame
+    # path, the same run as patch 0, bit for bit; a smaller patch trains otherwise.
+    from clrender.ndrf import train as ndrf_train
+
+    teacher, ds = small_run_inputs
+    tcfg = replace(ndrf_train.TRAIN_PRESETS["tiny"], iterations=6, n_distill=4,
+                   checkpoint_every=6, log_every=1)
+    states = {}
+    for patch in (0, 24, 8):
+        run = ndrf_train.train(ds, tmp_path / str(patch), teacher, preset="tiny",
+                               progress=False, train_config=replace(tcfg, patch=patch))
+        states[patch] = _features(run)[1]
+    assert all(torch.equal(states[0][k], states[24][k]) for k in states[0])
+    assert not all(torch.equal(states[0][k], states[8][k]) for k in states[0])
+
+
+@pytest.mark.slow
 def test_disk_backed_training_equals_in_memory(tmp_path, small_run_inputs, monkeypatch):
     """Views forced onto disk (a 1-byte budget) train the same model bit for bit as views in
     memory, also when the disk-backed run is interrupted and resumed; the budget is not in
