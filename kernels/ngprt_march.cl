@@ -30,6 +30,20 @@
 #include "ngprt_features.h"
 #include "ngprt_paper.h"
 
+#if !defined(OCC_IMAGE)
+#error "ngprt_march.cl needs -D OCC_IMAGE (render_cl.kernel_defines)"
+#endif
+#if OCC_IMAGE
+/* OCC_IMAGE (a GPU variant, render_cl.Tuning.occupancy_image): ours' exit codes read from
+ * a 3D image (uint16, x the fastest axis = the cell's z) through the texture path, one ray
+ * a work-item; every coordinate read is a cell of the grid. */
+#if MARCH_PAPER || RAYS != 1
+#error "OCC_IMAGE: ours' march with one ray a work-item (RAYS = 1)"
+#endif
+__constant sampler_t OCC_SAMPLER = CLK_NORMALIZED_COORDS_FALSE | CLK_ADDRESS_CLAMP_TO_EDGE |
+                                   CLK_FILTER_NEAREST;
+#endif
+
 #if COUNT_READS
 /* Global-memory reads of a ray so far (marches.READ_KINDS), counted only in the counting
  * build so that the timed kernels are unchanged. */
@@ -132,7 +146,12 @@ inline void write_pixel(const Rays *r, int j, int n, __global float *feat,
 __kernel __attribute__((vec_type_hint(vfloat)))
 void ngprt_march(__global const float *cam, const int width, const int height,
                  const float s, const float near, const float far,
-                 __global const occ_t *occupancy, __global const uchar *G,
+#if OCC_IMAGE
+                 __read_only image3d_t occupancy_image,
+#else
+                 __global const occ_t *occupancy,
+#endif
+                 __global const uchar *G,
                  __global const int *block_index, __global const float8 *blocks,
                  const int n_blocks, __global const table_t *tables,
                  __global const float *fusion,
@@ -145,7 +164,11 @@ void ngprt_march(__global const float *cam, const int width, const int height,
 {
     const int px0 = (int)get_global_id(0) * RAYS, py = get_global_id(1);
     if (px0 >= width || py >= height) return;
+#if OCC_IMAGE
+    Model m = {0, G, block_index, blocks, n_blocks, tables, fusion};
+#else
     Model m = {occupancy, G, block_index, blocks, n_blocks, tables, fusion};
+#endif
     inv_sigmoids(fusion, m.inv_sig);
     Lattice lattice;
     float8 acc[RAYS];
@@ -159,6 +182,9 @@ void ngprt_march(__global const float *cam, const int width, const int height,
         const MarchPoint p = march_point(&r, r.k);
 #if MARCH_PAPER
         const vint code = exit_code(m.occupancy, p.cell, active);
+#elif OCC_IMAGE
+        const vint code = select((vint)(0), (vint)(read_imageui(
+            occupancy_image, OCC_SAMPLER, (int4)(p.cell.z, p.cell.y, p.cell.x, 0)).x), active);
 #else
         const vint code = lane_gather_u16(m.occupancy, flat_index(p.cell, (vint)(OCC_RES)), active);
 #endif

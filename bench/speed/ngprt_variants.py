@@ -46,6 +46,7 @@ VARIANTS = {
     "tile-8x8": (Tuning(march_tile=(8, 8)), "march"),
     "tile-16x8": (Tuning(march_tile=(16, 8)), "march"),
     "half-tables+tile-8x8": (Tuning(half_tables=True, march_tile=(8, 8)), "march"),
+    "occupancy-image": (Tuning(occupancy_image=True), "march"),
     "deferred-local": (Tuning(deferred_local=True), "deferred"),
     "deferred-streamed": (Tuning(deferred_streamed=True), "deferred"),
     "deferred-local+streamed": (Tuning(deferred_local=True, deferred_streamed=True),
@@ -57,9 +58,12 @@ DEFAULT_SIZES = ("800x800", "1920x1080")
 def pair_variant(model, tuning: Tuning, stage: str, cameras, repeats: int, device=None,
                  background=(1.0, 1.0, 1.0)) -> dict:
     """``tuning`` against the default build on ``stage``'s kernel time over ``cameras``
-    (:func:`time_pairs`), with the largest rgb difference on the first camera."""
-    base = Renderer(model, device=device, use_G=True)
-    row = Renderer(model, device=device, use_G=True, tuning=tuning)
+    (:func:`time_pairs`), with the largest rgb difference on the first camera. The
+    occupancy image takes one ray a work-item: it and its default are built so (a GPU's
+    lane width anyway)."""
+    rays = 1 if tuning.occupancy_image else None
+    base = Renderer(model, device=device, use_G=True, rays=rays)
+    row = Renderer(model, device=device, use_G=True, rays=rays, tuning=tuning)
     diff = float(np.abs(row.render(cameras[0], background)["rgb"]
                         - base.render(cameras[0], background)["rgb"]).max())
     pairs = time_pairs(row, base, cameras, repeats, stage, background)

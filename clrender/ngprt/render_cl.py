@@ -56,6 +56,8 @@ class Tuning:
         march_tile: the march's work-group as (work-items in x, rows), e.g. (8, 8) so a
             GPU's warp covers a 2D patch of rays; None: :func:`clrender.device.work_group_size`
             (a run of one row).
+        occupancy_image: ours' exit codes read from a 3D image (``-D OCC_IMAGE``: the
+            texture path) instead of a buffer; one ray a work-item, not the paper's march.
         deferred_local: the deferred MLP's weights copied into ``__local`` memory by each
             work-group (``-D DEFERRED_LOCAL``).
         deferred_streamed: the MLP's second hidden layer fed straight into the output layer
@@ -64,6 +66,7 @@ class Tuning:
 
     half_tables: bool = False
     march_tile: tuple[int, int] | None = None
+    occupancy_image: bool = False
     deferred_local: bool = False
     deferred_streamed: bool = False
 
@@ -77,6 +80,7 @@ class Tuning:
         """A short label: the variants on, joined by '+' ('default' for none)."""
         on = [*(["half-tables"] if self.half_tables else []),
               *([f"tile-{self.march_tile[0]}x{self.march_tile[1]}"] if self.march_tile else []),
+              *(["occupancy-image"] if self.occupancy_image else []),
               *(["deferred-local"] if self.deferred_local else []),
               *(["deferred-streamed"] if self.deferred_streamed else [])]
         return "+".join(on) or "default"
@@ -157,7 +161,7 @@ def kernel_defines(config, use_G: bool, deferred_vec: int = 1, rays: int = 1,
         "COARSE_BLOCK": config.coarse_block, "N_ATT": config.n_attention,
         "N_INV": config.n_inv_attention, "RAYS": rays, "G_IN_CODE": g_in_codes(config),
         "MARCH_PAPER": check_march(march) == "paper", "COUNT_READS": bool(count_reads),
-        "HALF_TABLES": tuning.half_tables,
+        "HALF_TABLES": tuning.half_tables, "OCC_IMAGE": tuning.occupancy_image,
     }
     return march, {**shared, "DEFERRED_VEC": deferred_vec,
                    "DEFERRED_CONSTANT": bool(deferred_constant),
@@ -270,6 +274,9 @@ class Renderer:
         self.rays = rays or lane_width(rt.device)
         self.deferred_vec = deferred_vec or lane_width(rt.device)
         self.deferred_constant = deferred_in_constant(rt.device)
+        if tuning.occupancy_image and (self.march_kind != "ours" or self.rays != 1):
+            raise ValueError("occupancy_image: ours' march with one ray a work-item (rays=1), "
+                             f"not march={self.march_kind!r} with rays={self.rays}")
         if tuning.deferred_local and DEFERRED_BYTES > rt.device.local_mem_size:
             raise ValueError(f"deferred_local: the MLP's {DEFERRED_BYTES} bytes of weights "
                              f"exceed {rt.device.name}'s {rt.device.local_mem_size} bytes of "
@@ -318,6 +325,16 @@ class Renderer:
                              f"the march kernel's {limit} on {self.runtime.device.name}")
         return tuple(tile)
 
+    def _image(self, grid: np.ndarray) -> cl.Image:
+        """A read-only 3D image of a uint16 (res, res, res) grid, image x = its last axis."""
+        dev = self.runtime.device
+        if not dev.image_support or max(grid.shape) > min(
+                dev.image3d_max_width, dev.image3d_max_height, dev.image3d_max_depth):
+            raise ValueError(f"occupancy_image: {dev.name} has no 3D image of "
+                             f"{grid.shape[0]}^3 (image support {bool(dev.image_support)})")
+        return cl.image_from_array(self.runtime.context, np.ascontiguousarray(grid, np.uint16),
+                                   num_channels=1, mode="r")
+
     def _buffer(self, array: np.ndarray) -> cl.Buffer:
         mf = cl.mem_flags
         a = np.ascontiguousarray(array)
@@ -348,9 +365,11 @@ class Renderer:
         stride = FEATURES * (1 + -(-cfg.n_attention // FEATURES))
         padded = np.zeros(blocks.shape[:4] + (stride,), F32)
         padded[..., :blocks.shape[4]] = blocks
+        occ = (exit_codes(self.model, self.use_G) if self.march_kind == "ours"
+               else mip_levels(self.model))
         self._bufs = {
-            "occ": self._buffer(exit_codes(self.model, self.use_G) if self.march_kind == "ours"
-                                else mip_levels(self.model)),
+            "occ": (self._image(occ.reshape((cfg.occ_res,) * 3)) if self.tuning.occupancy_image
+                    else self._buffer(occ)),
             "G": self._buffer(np.asarray(arrays["G"], np.uint8)),
             "block_index": self._buffer(np.asarray(arrays["coarse_block_index"], np.int32)),
             # No block: one zero corner, so no read of a kernel is out of range.
