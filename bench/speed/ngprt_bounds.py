@@ -55,13 +55,23 @@ def table_bytes(model, march: str = "ours") -> dict:
             "fine": cfg.L * cfg.T * F8_BYTES}
 
 
+# Buffer sizes of two reference gather rates: one inside any device's last-level cache
+# (a GPU's L2, a CPU's L3), one far outside it (a GPU's HBM, a CPU's DRAM); a table's own
+# rate falls between them as its size does.
+REFERENCE_GATHER_BYTES = {"cached (2 MiB)": 2 << 20, "memory (1 GiB)": 1 << 30}
+
+
 def measure_limits(model, device=None, repeats: int = 5, march: str = "ours") -> dict:
     """Gather rates (per second) for each of the model's table sizes (:func:`table_bytes`
-    of ``march``), the FLOP rate and the stream rate (bytes per second)."""
+    of ``march``) and at :data:`REFERENCE_GATHER_BYTES`, the FLOP rate and the stream rate
+    (bytes per second)."""
     sizes = table_bytes(model, march)
     rates = {name: gather_rate(max(nbytes, F8_BYTES), device, repeats)
              for name, nbytes in sizes.items()}
-    return {"gathers_per_s": rates, "flops_per_s": flop_rate(device, repeats),
+    reference = {name: gather_rate(nbytes, device, repeats)
+                 for name, nbytes in REFERENCE_GATHER_BYTES.items()}
+    return {"gathers_per_s": rates, "reference_gathers_per_s": reference,
+            "flops_per_s": flop_rate(device, repeats),
             "stream_bytes_per_s": stream_rate(device, repeats),
             "table_bytes": sizes, "march": march, "device": get_runtime(device).name}
 

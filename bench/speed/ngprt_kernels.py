@@ -160,9 +160,14 @@ def _stage_cells(r: dict) -> list[str]:
 
 
 def _stream_note(limits: dict) -> str:
-    rate = limits.get("stream_bytes_per_s")
-    return f"; streamed {rate / 1e9:.1f} GB/s, {MARCH_PIXEL_BYTES} bytes a pixel a stage" \
-        if rate else ""
+    """The stream rate and the reference gather rates, where measured."""
+    rate, ref = limits.get("stream_bytes_per_s"), limits.get("reference_gathers_per_s", {})
+    note = (f"; streamed {rate / 1e9:.1f} GB/s, {MARCH_PIXEL_BYTES} bytes a pixel a stage"
+            if rate else "")
+    if ref:
+        note += "; for reference, gathers " + ", ".join(
+            f"{name} {r / 1e9:.2f} G/s" for name, r in ref.items())
+    return note
 
 
 def bounds_note(meta: dict) -> str:
