@@ -28,7 +28,7 @@ import numpy as np
 
 from bench.speed.ngprt_bounds import measure_limits
 from bench.speed.ngprt_kernels import (STAGE_HEAD, _print_row, _section, _stage_cells,
-                                       _write, bounds_note)
+                                       _write, bounds_note, measure)
 from bench.speed.sizes import at_size, parse_size, trained_test_set
 from bench.tables.measure import time_pairs
 from clrender.cliopts import whole_number
@@ -55,15 +55,13 @@ VARIANTS = {
 DEFAULT_SIZES = ("800x800", "1920x1080")
 
 
-def pair_variant(model, tuning: Tuning, stage: str, cameras, repeats: int, device=None,
+def pair_variant(base: Renderer, tuning: Tuning, stage: str, cameras, repeats: int,
                  background=(1.0, 1.0, 1.0)) -> dict:
-    """``tuning`` against the default build on ``stage``'s kernel time over ``cameras``
-    (:func:`time_pairs`), with the largest rgb difference on the first camera. The
-    occupancy image takes one ray a work-item: it and its default are built so (a GPU's
-    lane width anyway)."""
-    rays = 1 if tuning.occupancy_image else None
-    base = Renderer(model, device=device, use_G=True, rays=rays)
-    row = Renderer(model, device=device, use_G=True, rays=rays, tuning=tuning)
+    """``tuning`` against ``base`` (the default build, of the same model, device and lanes)
+    on ``stage``'s kernel time over ``cameras`` (:func:`time_pairs`), with the largest rgb
+    difference on the first camera."""
+    row = Renderer(base.model, device=base.runtime, use_G=True, rays=base.rays,
+                   tuning=tuning)
     diff = float(np.abs(row.render(cameras[0], background)["rgb"]
                         - base.render(cameras[0], background)["rgb"]).max())
     pairs = time_pairs(row, base, cameras, repeats, stage, background)
@@ -111,11 +109,14 @@ def markdown(stages: list[dict], pairs: list[dict], meta: dict) -> str:
 
 def run(model_path, data, sizes, views, repeats: int, out: Path, variants, device=None,
         downscale=None, preset_name: str = "cpu") -> dict:
-    from bench.speed.ngprt_kernels import measure
-
     model, cams_at, background, what = frames(model_path, data, sizes, views, downscale,
                                               preset_name)
     limits = measure_limits(model, device)
+    # The default build each variant is paired with, built once: the device's lanes, and
+    # one ray a work-item for the occupancy image (a GPU's lane width anyway).
+    defaults = {rays: Renderer(model, device=device, use_G=True, rays=rays)
+                for rays in {1 if VARIANTS[name][0].occupancy_image else None
+                             for name in variants}}
     stages, pairs = [], []
     for size, cams in cams_at.items():
         m = measure(model, cams, True, repeats, device, False, limits, None, background)
@@ -123,7 +124,8 @@ def run(model_path, data, sizes, views, repeats: int, out: Path, variants, devic
         _print_row(f"{size:>9s} default", m)
         for name in variants:
             tuning, stage = VARIANTS[name]
-            p = pair_variant(model, tuning, stage, cams, repeats, device, background)
+            base = defaults[1 if tuning.occupancy_image else None]
+            p = pair_variant(base, tuning, stage, cams, repeats, background)
             pairs.append({"variant": name, **p})
             print(f"{size:>9s} {name:24s} {stage:8s} {p['ms_baseline']:8.2f} -> "
                   f"{p['ms_row']:8.2f} ms  {p['ratio']:.3f}x ({p['lo']:.3f}-{p['hi']:.3f})  "
