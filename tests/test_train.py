@@ -237,6 +237,56 @@ def test_presets_change_sizes_and_counts_never_the_method():
     assert TRAIN_PRESETS["cpu-long"].iterations > TRAIN_PRESETS["cpu"].iterations
 
 
+
+def test_size_options_change_the_table_or_the_batch_alone():
+    """``log2_T`` and ``batch`` (training options, for comparing our sizes with the paper's):
+    None keeps the preset's configs and cache spec; a value changes its own sizes (the ray
+    cap scaled with the batch) and the cache spec; out-of-range values are refused."""
+    from dataclasses import asdict
+
+    from bench.train_curve import option_values
+    from clrender.ngprt.method import model_spec
+    from clrender.ngprt.train import TRAIN_PRESETS, sized
+
+    base_cfg, base_tcfg = sized("cpu-long")
+    assert (base_cfg, base_tcfg) == (preset("cpu-long"), TRAIN_PRESETS["cpu-long"])
+    cfg, tcfg = sized("cpu-long", log2_T=21)
+    assert cfg.log2_T == 21 and tcfg == base_tcfg
+    assert {k for k, v in asdict(cfg).items() if v != asdict(base_cfg)[k]} == {"log2_T"}
+    cfg, tcfg = sized("cpu-long", batch=1 << 17)
+    assert cfg == base_cfg
+    assert (tcfg.target_samples, tcfg.max_rays) == (1 << 17, 4 * base_tcfg.max_rays)
+    assert {k for k, v in asdict(tcfg).items() if v != asdict(base_tcfg)[k]} == \
+        {"target_samples", "max_rays"}
+    specs = [model_spec("cpu-long", **o) for o in ({}, {"log2_T": 21}, {"batch": 1 << 17})]
+    assert len({repr(s) for s in specs}) == 3
+    with pytest.raises(ValueError, match="batch=512"):
+        sized("cpu-long", batch=512)
+    assert option_values("ngprt", "log2_T=19,21") == ("log2_T", [19, 21])
+    with pytest.raises(ValueError, match="batch"):
+        option_values("ngprt", "batch=512")
+
+
+def test_size_options_reach_the_run(tmp_path):
+    """A run trained with ``log2_T`` and ``batch`` records them in config.json, its model
+    has tables of that size and its batches stay under the scaled ray cap."""
+    import json
+
+    from clrender.data import make_scene
+    from clrender.ngprt.train import train
+
+    data = make_scene("bounded", tmp_path / "scene", seed=0, n_train=4, n_test=1, width=16,
+                      height=16)
+    run = train(data, tmp_path / "run", preset="tiny", iterations=3, device="cpu",
+                progress=False, log2_T=12, batch=1 << 12)
+    conf = json.loads((run / "config.json").read_text())
+    assert conf["model"]["log2_T"] == 12
+    assert (conf["train"]["target_samples"], conf["train"]["max_rays"]) == (1 << 12, 512)
+    state = torch.load(run / "checkpoint.pt", weights_only=True)["model"]
+    assert any(v.shape[-2:] == (1 << 12, 8) for v in state.values())
+    rays = [json.loads(line)["rays"] for line in (run / "log.jsonl").read_text().splitlines()]
+    assert rays and max(rays) <= 512
+
 def test_fused_adam_follows_the_default_adam():
     """make_optimizer's fused CPU Adam against torch's default Adam on the same gradients:
     parameters within 1e-6 after 20 steps (float32 rounding of a reordered update; the

@@ -22,6 +22,10 @@ TRAIN_OPTIONS = {
     "L": Option(int, 2, "fine hash levels L", flag="--levels", minimum=1),
     "engine": Option(str, "fast", "training engine: fast (fused C++ stages, CPU; elsewhere "
                      "the torch engine) or torch (autograd, the reference)", choices=ENGINES),
+    "log2_T": Option(int, None, "fine hash tables of 2^N entries a level (default: the "
+                     "preset's; paper 22)", flag="--log2-T", minimum=10),
+    "batch": Option(int, None, "samples a training batch aims at, its ray cap scaled alike "
+                    "(default: the preset's; paper 2^21 = 2097152)", minimum=1024),
 }
 BAKE_OPTIONS = {
     "G_metric": Option(str, "box", "what the occupancy distance grid G measures: box (from a "
@@ -70,14 +74,14 @@ class Renderer(_CLRenderer):
 def train(data, out, preset: str = DEFAULT_PRESET, *, seed: int = 0,
           iterations: int | None = None, torch_device=None, progress: bool = True,
           on_step=None, downscale: int = 1, variant: str = "separate-v", L: int = 2,
-          engine: str = "fast"):
+          engine: str = "fast", log2_T: int | None = None, batch: int | None = None):
     """Train an NGP-RT run (:func:`clrender.ngprt.train.train`); ``on_step(step, bake)`` as
     :data:`clrender.contract.StepHook` (``bake()``: the training state baked in memory)."""
     from .train import train as train_ngprt
 
     return train_ngprt(data, out, preset=preset, variant=variant, L=L, iterations=iterations,
                        seed=seed, device=torch_device, progress=progress, downscale=downscale,
-                       engine=engine,
+                       engine=engine, log2_T=log2_T, batch=batch,
                        on_step=None if on_step is None else _step_hook(data, on_step, downscale))
 
 
@@ -107,16 +111,16 @@ def bake_run(run_dir, out_path, **options):
 
 
 def model_spec(preset: str, variant: str = "separate-v", L: int = 2,
-               engine: str = "fast") -> dict:
+               engine: str = "fast", log2_T: int | None = None,
+               batch: int | None = None) -> dict:
     """Everything but data and seed that determines a trained model (the cache key, which
     names the training engine)."""
     from dataclasses import asdict
 
-    from .config import preset as model_preset
-    from .train import TRAIN_PRESETS
+    from .train import sized
 
-    return {"model": model_preset(preset, variant=variant, L=L).to_dict(),
-            "train": asdict(TRAIN_PRESETS[preset]), "engine": engine}
+    cfg, tcfg = sized(preset, variant, L, log2_T=log2_T, batch=batch)
+    return {"model": cfg.to_dict(), "train": asdict(tcfg), "engine": engine}
 
 
 def example_model(path) -> Path:

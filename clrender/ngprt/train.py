@@ -98,6 +98,24 @@ TRAIN_PRESETS: dict[str, TrainConfig] = {
 }
 
 
+def sized(preset: str, variant: str = "separate-v", L: int = 2, scene: str = "bounded",
+          log2_T: int | None = None, batch: int | None = None):
+    """``(ModelConfig, TrainConfig)`` of ``preset`` with the sizes a run may change (None:
+    the preset's): ``log2_T``, the fine tables' 2^log2_T entries a level; ``batch``, the
+    samples a batch aims at (``target_samples``), its ray cap ``max_rays`` scaled by the
+    same factor (the cap still binds on rays of fewer than target_samples / max_rays
+    samples, so the batch grows on every scene)."""
+    cfg = model_preset(preset, variant=variant, L=L, scene=scene,
+                       **({} if log2_T is None else {"log2_T": int(log2_T)}))
+    tcfg = TRAIN_PRESETS[preset]
+    if batch is not None:
+        if int(batch) < 1024:
+            raise ValueError(f"batch={batch}: a batch aims at 1024 samples or more")
+        tcfg = replace(tcfg, target_samples=int(batch),
+                       max_rays=max(64, round(tcfg.max_rays * int(batch) / tcfg.target_samples)))
+    return cfg, tcfg
+
+
 def step_scale(cfg: ModelConfig, u: torch.Tensor) -> torch.Tensor:
     """(N,) largest world length of a unit of lattice distance at grid coordinates u
     (N, 3), over directions (1 inside the unit cube). The unbounded lattice is uniform in
@@ -238,7 +256,8 @@ def load_run(run_dir, device=None):
 def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 2,
           iterations: int | None = None, seed: int = 0, device=None,
           train_config: TrainConfig | None = None, progress: bool = True,
-          on_step=None, downscale: int = 1, engine: str = "fast") -> Path:
+          on_step=None, downscale: int = 1, engine: str = "fast",
+          log2_T: int | None = None, batch: int | None = None) -> Path:
     """Train an NGP-RT model on the dataset folder ``data`` (or a loaded Dataset) into the
     run folder ``out`` (:class:`clrender.runs.RunFolder`).
 
@@ -250,6 +269,8 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
             does not run; a checkpoint resumes under either).
         downscale: the dataset's ``images_{downscale}/`` or its images shrunk that many
             times (:func:`clrender.data.load_dataset`); recorded in ``config.json``.
+        log2_T, batch: the preset's table size and batch changed (:func:`sized`; None:
+            the preset's); ``train_config``, when given, replaces the batch's config.
         on_step: called as ``on_step(step, model, occ, gamma)`` after every iteration
             ``step`` (0-based, as ``log.jsonl``: its optimiser step and gamma update
             done, its log line and checkpoint written where due), with the :class:`NGPRT`
@@ -262,8 +283,8 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
     dev = pick_device(device)
     torch.manual_seed(seed)
     ds, data_path = training_data(data, downscale)
-    cfg = model_preset(preset, variant=variant, L=L, scene=ds.scene)
-    tcfg = train_config or TRAIN_PRESETS[preset]
+    cfg, tcfg = sized(preset, variant, L, ds.scene, log2_T, batch)
+    tcfg = train_config or tcfg
     if iterations is not None:
         tcfg = replace(tcfg, iterations=int(iterations))
     engine = engines.get(engine, dev)            # the one that trains, recorded as such
