@@ -237,7 +237,6 @@ def test_presets_change_sizes_and_counts_never_the_method():
     assert TRAIN_PRESETS["cpu-long"].iterations > TRAIN_PRESETS["cpu"].iterations
 
 
-
 def test_size_options_change_the_table_or_the_batch_alone():
     """``log2_T`` and ``batch`` (training options, for comparing our sizes with the paper's):
     None keeps the preset's configs and cache spec; a value changes its own sizes (the ray
@@ -286,6 +285,7 @@ def test_size_options_reach_the_run(tmp_path):
     assert any(v.shape[-2:] == (1 << 12, 8) for v in state.values())
     rays = [json.loads(line)["rays"] for line in (run / "log.jsonl").read_text().splitlines()]
     assert rays and max(rays) <= 512
+
 
 def test_fused_adam_follows_the_default_adam():
     """make_optimizer's fused CPU Adam against torch's default Adam on the same gradients:

@@ -108,12 +108,13 @@ def sized(preset: str, variant: str = "separate-v", L: int = 2, scene: str = "bo
     cfg = model_preset(preset, variant=variant, L=L, scene=scene,
                        **({} if log2_T is None else {"log2_T": int(log2_T)}))
     tcfg = TRAIN_PRESETS[preset]
-    if batch is not None:
-        if int(batch) < 1024:
-            raise ValueError(f"batch={batch}: a batch aims at 1024 samples or more")
-        tcfg = replace(tcfg, target_samples=int(batch),
-                       max_rays=max(64, round(tcfg.max_rays * int(batch) / tcfg.target_samples)))
-    return cfg, tcfg
+    if batch is None:
+        return cfg, tcfg
+    samples = int(batch)
+    if samples < 1024:
+        raise ValueError(f"batch={batch}: a batch aims at 1024 samples or more")
+    return cfg, replace(tcfg, target_samples=samples,
+                        max_rays=max(64, round(tcfg.max_rays * samples / tcfg.target_samples)))
 
 
 def step_scale(cfg: ModelConfig, u: torch.Tensor) -> torch.Tensor:
