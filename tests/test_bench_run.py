@@ -224,3 +224,21 @@ def test_fingerprint_holds_the_downscale(tmp_path):
     plain = cache.data_fingerprint(tmp_path)
     assert cache.data_fingerprint(tmp_path, 1) == plain
     assert len({plain, cache.data_fingerprint(tmp_path, 2), cache.data_fingerprint(tmp_path, 4)}) == 3
+
+
+def test_a_resumed_training_counts_the_earlier_processes_up_to_where_each_was_resumed(tmp_path):
+    """Three processes of one run: killed after step 450 (checkpoint at 400), resumed at 400
+    and killed after 950 (checkpoint at 900), resumed at 900 to the end; each logs every 50
+    steps, its clock from its own start. The earlier two count up to steps 350 and 850."""
+    from bench.modelcache import cache
+
+    def process(first, last, seconds_a_step):
+        return [{"step": s, "seconds": (s - first + 1) * seconds_a_step}
+                for s in range(first, last + 1, 50)]
+
+    log = process(0, 450, 0.1) + process(400, 950, 0.2) + process(900, 1999, 0.3)
+    (tmp_path / "log.jsonl").write_text("".join(json.dumps(line) + "\n" for line in log))
+    assert cache.earlier_seconds(tmp_path) == pytest.approx(351 * 0.1 + 451 * 0.2)
+    (tmp_path / "log.jsonl").write_text("".join(json.dumps(line) + "\n"
+                                                for line in process(0, 1999, 0.1)))
+    assert cache.earlier_seconds(tmp_path) == 0.0

@@ -221,13 +221,33 @@ def train_into(plan: ModelPlan, folder: Path, teacher_baked: Path | None,
     plugin.train(str(plan.data), folder / "run", plan.preset, seed=plan.seed,
                  torch_device=torch_device, progress=progress, downscale=plan.downscale,
                  **options)
-    minutes = (time.perf_counter() - start) / 60.0
+    seconds = time.perf_counter() - start
+    minutes = (seconds + (earlier_seconds(folder / "run") if resumed else 0.0)) / 60.0
     plugin.bake_run(folder / "run", folder / "model.npz")
     who = provenance.trained_by(str(pick_device(torch_device)), torch.get_num_threads(),
                                 revision)
     return {"spec": plan.spec, "train_minutes": minutes,
             "trained_by": {**who, "method": plan.method, "preset": plan.preset,
                            "seed": plan.seed, "resumed_checkpoint": resumed}}
+
+
+def earlier_seconds(run_dir: Path) -> float:
+    """Training seconds of the earlier processes of a resumed run, from its ``log.jsonl``.
+
+    Each process of the run logs ``seconds`` from its own start (the clock falls back where
+    one resumed) and its last checkpoint's steps were trained again by the next; each
+    earlier process counts up to its last line before the step its successor started
+    from. With one process, 0."""
+    from clrender.runs import read_log
+
+    segments: list[list[dict]] = [[]]
+    for line in read_log(run_dir):
+        if segments[-1] and line["seconds"] < segments[-1][-1]["seconds"]:
+            segments.append([])
+        segments[-1].append(line)
+    return sum(max((line["seconds"] for line in segment if line["step"] < after[0]["step"]),
+                   default=0.0)
+               for segment, after in zip(segments, segments[1:]))
 
 
 def commit(plan: ModelPlan, files: dict[str, bytes], record: dict) -> None:
