@@ -207,7 +207,8 @@ def train_into(plan: ModelPlan, folder: Path, teacher_baked: Path | None,
                torch_device: str | None = None, progress: bool = True,
                revision: str | None = None) -> dict:
     """Train ``plan`` into ``folder/run`` and bake ``folder/model.npz``; returns the
-    record :func:`commit` stores (``spec``, ``train_minutes``, ``trained_by``;
+    record :func:`commit` stores (``spec``, ``train_minutes``: a resumed run's earlier
+    processes included, :func:`earlier_seconds`; ``trained_by``;
     ``revision``: see :func:`bench.modelcache.provenance.trained_by`)."""
     import torch
 
@@ -221,12 +222,11 @@ def train_into(plan: ModelPlan, folder: Path, teacher_baked: Path | None,
     plugin.train(str(plan.data), folder / "run", plan.preset, seed=plan.seed,
                  torch_device=torch_device, progress=progress, downscale=plan.downscale,
                  **options)
-    seconds = time.perf_counter() - start
-    minutes = (seconds + (earlier_seconds(folder / "run") if resumed else 0.0)) / 60.0
+    seconds = time.perf_counter() - start + (earlier_seconds(folder / "run") if resumed else 0.0)
     plugin.bake_run(folder / "run", folder / "model.npz")
     who = provenance.trained_by(str(pick_device(torch_device)), torch.get_num_threads(),
                                 revision)
-    return {"spec": plan.spec, "train_minutes": minutes,
+    return {"spec": plan.spec, "train_minutes": seconds / 60.0,
             "trained_by": {**who, "method": plan.method, "preset": plan.preset,
                            "seed": plan.seed, "resumed_checkpoint": resumed}}
 
