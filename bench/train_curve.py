@@ -25,8 +25,10 @@ do, ``--test-stride K`` scores every K-th test view (the first included), ``--po
 evaluates after about N steps instead of :data:`N_POINTS` (the first evaluations, of a
 model whose occupancy grid has not pruned empty space yet, are the slowest);
 ``--iterations N`` trains N steps instead of the preset's (curves of equal minutes for
-presets or engines whose steps take different times). Each evaluation scores PSNR, SSIM and
-LPIPS-Alex and rewrites ``OUT/train-curve.{csv,png}``, so a long run shows its curve so far;
+presets or engines whose steps take different times); ``--x-axis steps`` plots against
+steps (a run whose minutes are no timing: paused, or resumed on other threads). Each
+evaluation scores PSNR, SSIM and LPIPS-Alex and rewrites ``OUT/train-curve.{csv,png}``, so
+a long run shows its curve so far;
 ``--resume`` continues a run cut short from its last checkpoint (the points measured before
 it kept, in the run folder's ``curve.jsonl``).
 """
@@ -299,10 +301,15 @@ def measure_curve(root: Path, data: Path, fingerprint: str, preset: str, seed: i
 
 PANELS = (("test_psnr", "test PSNR (dB)"), ("test_ssim", "test SSIM"),
           ("test_lpips", "test LPIPS-Alex (lower is better)"))
+# The plot's x axis (--x-axis): a point's x value and the axis label.
+X_AXES = {"minutes": (lambda p: p["train_seconds"] / 60,
+                      "training wall-clock (min, evaluations excluded)"),
+          "steps": (lambda p: p["step"], "training step")}
 
 
 def _plot(points: list[dict], meta: dict) -> bytes:
-    """PSNR, SSIM and LPIPS (where scored) against training minutes, one panel each."""
+    """PSNR, SSIM and LPIPS (where scored) against training minutes (or steps:
+    ``meta["x_axis"]``, a key of :data:`X_AXES`), one panel each."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -313,6 +320,7 @@ def _plot(points: list[dict], meta: dict) -> bytes:
     fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.2), squeeze=False)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     groups = list(dict.fromkeys((p["preset"], p.get("option", "")) for p in points))
+    x_value, x_label = X_AXES[meta.get("x_axis", "minutes")]
     for ax, (key, label) in zip(axes[0], panels):
         for g, (preset, option) in enumerate(groups):
             name = f"{preset} {option}".strip()
@@ -320,7 +328,7 @@ def _plot(points: list[dict], meta: dict) -> bytes:
             seeds = list(dict.fromkeys(p["seed"] for p in mine))
             for i, seed in enumerate(seeds):      # one colour a curve, one line a seed
                 pts = [p for p in mine if p["seed"] == seed and p.get(key) is not None]
-                ax.plot([p["train_seconds"] / 60 for p in pts], [p[key] for p in pts],
+                ax.plot([x_value(p) for p in pts], [p[key] for p in pts],
                         marker="o", color=colours[g % len(colours)],
                         alpha=1.0 if i == 0 else 0.55,
                         label=f"{name} (seed{'s' if len(seeds) > 1 else ''} "
@@ -328,7 +336,7 @@ def _plot(points: list[dict], meta: dict) -> bytes:
             if key == "test_psnr" and mine[0].get("teacher_test_psnr") is not None:
                 ax.axhline(mine[0]["teacher_test_psnr"], color=colours[g % len(colours)],
                            linestyle="--", label=f"{name}: teacher")
-        ax.set_xlabel("training wall-clock (min, evaluations excluded)")
+        ax.set_xlabel(x_label)
         ax.set_ylabel(f"{label}, baked model, OpenCL")
         ax.grid(alpha=0.3)
     axes[0][0].legend()
@@ -349,7 +357,7 @@ def _cell(value, fmt: str = "{:.4f}") -> str:
 def write_curve(out_dir: Path, points: list[dict], meta: dict) -> str:
     """Write ``train-curve.csv`` and ``train-curve.png`` (atomically); returns a short
     text table of the points. ``meta``: scene, git_revision, date, device (and the curve's
-    ``row`` name, for the plot's title)."""
+    ``row`` name, for the plot's title; ``x_axis``, see :func:`_plot`)."""
     buf = io.StringIO()
     writer = csv.writer(buf)
     writer.writerow(COLUMNS)
@@ -423,7 +431,7 @@ def run(args, meta: dict) -> str:
     meta = {**meta, "scene": scene if args.downscale == 1
             else f"{scene} (downscale {args.downscale})", "method": args.method,
             "row": name if args.test_stride == 1
-            else f"{name}, every {args.test_stride}th test view"}
+            else f"{name}, every {args.test_stride}th test view", "x_axis": args.x_axis}
     points, text = [], ""
     for preset in args.presets or PRESETS:
         # Seed outermost: a run cut short still holds whole pairs to compare.
@@ -460,6 +468,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--iterations", type=whole_number("iterations"), default=None, metavar="N",
                    help="train N steps instead of the preset's (a budget of equal minutes for "
                         "presets or engines of different step times)")
+    p.add_argument("--x-axis", choices=tuple(X_AXES), default="minutes",
+                   help="the plot's x axis: training minutes (default) or steps (a run whose "
+                        "minutes are not a timing: paused, resumed on other threads)")
     p.add_argument("--resume", action="store_true",
                    help="continue each curve's run folder from its checkpoint (a run cut "
                         "short), keeping the points measured before it, instead of afresh")

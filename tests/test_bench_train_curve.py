@@ -240,3 +240,27 @@ def test_ndrf_curve_through_its_step_hook(tmp_path, monkeypatch, one_torch_threa
                                       progress=False, teacher=str(teacher))
     curve, plain = (torch.load(d / "checkpoint.pt", weights_only=True) for d in (run_dir, plain))
     torch.testing.assert_close(curve["model"], plain["model"], rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("x_axis, expected", [(None, [0.5, 1.0, 1.5]), ("steps", [100, 200, 300])])
+def test_x_axis_plots_minutes_or_steps(tmp_path, monkeypatch, x_axis, expected):
+    """What the command's plot draws against: training minutes by default, steps with
+    ``--x-axis steps`` (the three panels, one curve each; training replaced by a stand-in)."""
+    import matplotlib.axes
+
+    drawn, plot = [], matplotlib.axes.Axes.plot
+    monkeypatch.setattr(matplotlib.axes.Axes, "plot",
+                        lambda ax, x, *a, **k: drawn.append(list(x)) or plot(ax, x, *a, **k))
+
+    def fake_curve(root, data, fingerprint, preset, seed=0, on_point=None, **kwargs):
+        return [{"method": "ngprt", "preset": preset, "seed": seed, "step": s,
+                 "train_seconds": 0.3 * s, "eval_seconds": 1.0, "test_psnr": 20.0 + s / 100,
+                 "test_ssim": 0.5, "test_lpips": 0.3, "train_psnr": 21.0,
+                 "teacher_test_psnr": None} for s in (100, 200, 300)]
+
+    monkeypatch.setattr(train_curve, "measure_curve", fake_curve)
+    (tmp_path / "scene").mkdir()
+    assert run.main(["train-curve", "--preset", "tiny", "--scene", str(tmp_path / "scene"),
+                     "--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
+                    + ([] if x_axis is None else ["--x-axis", x_axis])) == 0
+    assert drawn == [expected] * 3
