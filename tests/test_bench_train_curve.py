@@ -16,6 +16,15 @@ def csv_rows(path) -> list[dict]:
     return list(csv.DictReader(path.read_text().splitlines()))
 
 
+def stand_in_points(preset, seed) -> list[dict]:
+    """A curve's points as :func:`train_curve.measure_curve` returns them, without training:
+    steps 0, 1, 2 at 10 s a step."""
+    return [{"method": "ngprt", "preset": preset, "seed": seed, "step": s,
+             "train_seconds": 10.0 * s, "eval_seconds": 1.0, "test_psnr": 10.0 + s,
+             "test_ssim": 0.5, "test_lpips": 0.25, "train_psnr": None if s else 12.0,
+             "teacher_test_psnr": None} for s in (0, 1, 2)]
+
+
 def test_argparse_accepts_repeated_presets_for_the_curve_only(tmp_path, capsys):
     args = train_curve.build_parser().parse_args(["--preset", "cpu", "--preset", "tiny"])
     assert args.presets == ["cpu", "tiny"]
@@ -42,10 +51,7 @@ def test_run_writes_every_preset_to_one_csv_and_png(tmp_path, monkeypatch, capsy
     seen = []
 
     def fake_curve(root, data, fingerprint, preset, seed=0, on_point=None, **kwargs):
-        points = [{"method": "ngprt", "preset": preset, "seed": seed, "step": s,
-                   "train_seconds": 10.0 * s, "eval_seconds": 1.0, "test_psnr": 10.0 + s,
-                   "test_ssim": 0.5, "test_lpips": 0.25, "train_psnr": None if s else 12.0,
-                   "teacher_test_psnr": None} for s in (0, 1, 2)]
+        points = stand_in_points(preset, seed)
         on_point(points[:1])            # the files hold the curves so far after each point
         seen.append(len(csv_rows(out / "train-curve.csv")))
         return points
@@ -242,7 +248,7 @@ def test_ndrf_curve_through_its_step_hook(tmp_path, monkeypatch, one_torch_threa
     torch.testing.assert_close(curve["model"], plain["model"], rtol=0, atol=0)
 
 
-@pytest.mark.parametrize("x_axis, expected", [(None, [0.5, 1.0, 1.5]), ("steps", [100, 200, 300])])
+@pytest.mark.parametrize("x_axis, expected", [(None, [0.0, 1 / 6, 1 / 3]), ("steps", [0, 1, 2])])
 def test_x_axis_plots_minutes_or_steps(tmp_path, monkeypatch, x_axis, expected):
     """What the command's plot draws against: training minutes by default, steps with
     ``--x-axis steps`` (the three panels, one curve each; training replaced by a stand-in)."""
@@ -251,16 +257,11 @@ def test_x_axis_plots_minutes_or_steps(tmp_path, monkeypatch, x_axis, expected):
     drawn, plot = [], matplotlib.axes.Axes.plot
     monkeypatch.setattr(matplotlib.axes.Axes, "plot",
                         lambda ax, x, *a, **k: drawn.append(list(x)) or plot(ax, x, *a, **k))
-
-    def fake_curve(root, data, fingerprint, preset, seed=0, on_point=None, **kwargs):
-        return [{"method": "ngprt", "preset": preset, "seed": seed, "step": s,
-                 "train_seconds": 0.3 * s, "eval_seconds": 1.0, "test_psnr": 20.0 + s / 100,
-                 "test_ssim": 0.5, "test_lpips": 0.3, "train_psnr": 21.0,
-                 "teacher_test_psnr": None} for s in (100, 200, 300)]
-
-    monkeypatch.setattr(train_curve, "measure_curve", fake_curve)
+    monkeypatch.setattr(train_curve, "measure_curve",
+                        lambda root, data, fingerprint, preset, seed=0, **kwargs:
+                        stand_in_points(preset, seed))
     (tmp_path / "scene").mkdir()
     assert run.main(["train-curve", "--preset", "tiny", "--scene", str(tmp_path / "scene"),
                      "--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
                     + ([] if x_axis is None else ["--x-axis", x_axis])) == 0
-    assert drawn == [expected] * 3
+    assert drawn == [pytest.approx(expected)] * 3
