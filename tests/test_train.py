@@ -483,6 +483,68 @@ def test_on_step_hook_fires_after_every_step_and_changes_nothing(tmp_path, one_t
     torch.testing.assert_close(with_hook["model"], plain["model"], rtol=0, atol=0)
 
 
+def _poisoned_render(monkeypatch, bad_steps):
+    """NGP-RT training whose colours are NaN at the calls ``bad_steps`` (0-based) of its
+    render: the loss and every gradient of those steps are not finite."""
+    from clrender.ngprt import train as ngprt_train
+
+    render, calls = ngprt_train.render_rays, []
+
+    def poisoned(*args, **kwargs):
+        r = render(*args, **kwargs)
+        if len(calls) in bad_steps:
+            r = {**r, "rgb": r["rgb"] * float("nan")}
+        calls.append(1)
+        return r
+
+    monkeypatch.setattr(ngprt_train, "render_rays", poisoned)
+
+
+def test_a_step_with_a_nonfinite_loss_is_skipped_counted_and_saved(tmp_path, monkeypatch):
+    """A step whose loss and gradients are NaN leaves the model as it was (no Adam step,
+    so no NaN reaches a parameter), is counted in the log and the checkpoint, and its
+    batch and model are saved to reproduce it; the steps around it train."""
+    import json
+
+    from clrender.data import make_scene
+    from clrender.ngprt.train import train
+
+    data = make_scene("bounded", tmp_path / "scene", seed=0, n_train=6, n_test=1, width=24,
+                      height=24)
+    _poisoned_render(monkeypatch, {2})
+    states = {}
+
+    def hook(step, model, occ, gamma):
+        states[step] = {k: v.detach().clone() for k, v in model.state_dict().items()}
+
+    run = train(data, tmp_path / "run", preset="tiny", iterations=5, device="cpu",
+                progress=False, on_step=hook)
+    torch.testing.assert_close(states[2], states[1], rtol=0, atol=0)
+    assert any(not torch.equal(states[3][k], states[2][k]) for k in states[2])
+    ckpt = torch.load(run / "checkpoint.pt", weights_only=True)
+    assert ckpt["skipped"] == 1
+    assert all(bool(torch.isfinite(v).all()) for v in ckpt["model"].values())
+    log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
+    assert log[-1]["skipped"] == 1
+    saved = torch.load(run / "nonfinite-step-2.pt", weights_only=True)
+    assert saved["step"] == 2 and saved["origins"].shape == saved["target"].shape
+    torch.testing.assert_close(saved["model"], states[1], rtol=0, atol=0)
+
+
+def test_a_run_of_nonfinite_steps_stops_with_an_error(tmp_path, monkeypatch):
+    """MAX_NONFINITE_IN_A_ROW skipped steps in a row stop the run with an error naming it."""
+    from clrender.data import make_scene
+    from clrender.ngprt import train as ngprt_train
+
+    data = make_scene("bounded", tmp_path / "scene", seed=0, n_train=4, n_test=1, width=16,
+                      height=16)
+    monkeypatch.setattr(ngprt_train, "MAX_NONFINITE_IN_A_ROW", 3)
+    _poisoned_render(monkeypatch, {1, 3, 4, 5})
+    with pytest.raises(RuntimeError, match="3 training steps in a row up to step 5"):
+        ngprt_train.train(data, tmp_path / "run", preset="tiny", iterations=8, device="cpu",
+                          progress=False)
+
+
 @pytest.mark.slow
 def test_fast_engine_model_bakes_and_renders_like_torch(tiny_run, tmp_path):
     """A `tiny` model trained with engine="fast" (fused C++ grid lookups, 60 steps),

@@ -2,8 +2,12 @@
 
 A run folder (:class:`clrender.runs.RunFolder`) holds ``config.json`` (``"method":
 "ngprt"``, model config, train config, data path),
-``checkpoint.pt`` (model, optimizer, training occupancy, gamma, step) and ``log.jsonl``
-(one JSON line per logged step: loss, psnr, gamma, samples per ray, rays, eta, lr).
+``checkpoint.pt`` (model, optimizer, training occupancy, gamma, step, steps skipped) and
+``log.jsonl`` (one JSON line per logged step: loss, psnr, gamma, samples per ray, rays, eta,
+lr, steps skipped). A step whose loss or gradients are not finite is skipped (no optimiser
+step, so a run is never poisoned), counted in the log and, the first time, its batch and
+model saved to ``nonfinite-step-N.pt`` to reproduce it; a run that skips
+:data:`MAX_NONFINITE_IN_A_ROW` steps in a row stops with an error.
 
 Examples:
     >>> run = train("/tmp/scn_b", "/tmp/run_b", preset="cpu", variant="separate-v", L=2)
@@ -296,14 +300,15 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
                     free=("engine",))
     model = NGPRT(cfg, engine).to(dev)
     opt = make_optimizer(model, tcfg)
-    occ, gamma, start = OccupancyGrid(cfg, dev), tcfg.gamma_init, 0
+    occ, gamma, start, skipped = OccupancyGrid(cfg, dev), tcfg.gamma_init, 0, 0
     state = run.resume(model, opt, dev)
     if state is not None:
         occ.ema, occ.binary = state["occ_ema"].to(dev), state["occ_binary"].to(dev)
         gamma, start = float(state["gamma"]), int(state["step"])
+        skipped = int(state.get("skipped", 0))
     run.write_config()
     _loop(model, opt, occ, gamma, start, RaySampler(ds, dev, getattr(ds, "alpha", None)), tcfg,
-          run, progress, on_step)
+          run, progress, on_step, skipped)
     return run.dir
 
 
@@ -316,14 +321,28 @@ def make_optimizer(model: NGPRT, tcfg: TrainConfig) -> torch.optim.Adam:
                             eps=tcfg.eps, fused=True if cpu else None)
 
 
+MAX_NONFINITE_IN_A_ROW = 50     # skipped steps in a row after which a run stops
+
+
+def finite_step(loss: torch.Tensor, params) -> bool:
+    """Whether ``loss`` and the gradients of ``params`` are all finite (one fused norm over
+    the gradients, ~2 ms a step for the ``cpu`` preset's 10.5M parameters on one core; a
+    norm that overflows float32 counts as not finite)."""
+    grads = [p.grad for p in params if p.grad is not None]
+    return bool(torch.isfinite(loss)) and bool(
+        torch.isfinite(torch.nn.utils.get_total_norm(grads, foreach=True)))
+
+
 def train_step(model, opt, occ, gamma: float, n_rays: int, step: int, sampler, tcfg) -> dict:
     """One iteration: occupancy update where due, a batch of ``n_rays`` rays, the loss
-    (S2.2), its backward and the optimiser step; each stage reported to
-    :mod:`clrender.ngprt.stages`.
+    (S2.2), its backward and, where the loss and gradients are finite, the optimiser step;
+    each stage reported to :mod:`clrender.ngprt.stages`.
 
     Returns:
         dict with ``loss`` (0-d tensor), ``rgb`` (R, 3) and ``target`` (R, 3) detached,
-        ``n_samples``, ``n_bar`` (samples per ray with samples), ``eta``, ``lr``.
+        ``n_samples``, ``n_bar`` (samples per ray with samples), ``eta``, ``lr``,
+        ``finite`` (False: the step was skipped) and ``batch`` (the rays' origins,
+        directions (R, 3), targets (R, 3) and background (3,)).
     """
     if step % tcfg.occ_every == 0:
         with stage("occupancy"):
@@ -345,12 +364,30 @@ def train_step(model, opt, occ, gamma: float, n_rays: int, step: int, sampler, t
     opt.zero_grad(set_to_none=True)
     backward(loss)
     with stage("optimiser"):
-        opt.step()
+        finite = finite_step(loss, model.parameters())
+        if finite:
+            opt.step()
     n_samples, hit = len(r["ray_ids"]), int((r["n_occ"] > 0).sum())
     # Rays that cross only empty space (background) carry no samples at any step
     # size, so the average of Eq. S3 is taken over the rays that have samples.
     return {"loss": loss.detach(), "rgb": r["rgb"].detach(), "target": target,
-            "n_samples": n_samples, "n_bar": n_samples / max(1, hit), "eta": eta, "lr": lr}
+            "n_samples": n_samples, "n_bar": n_samples / max(1, hit), "eta": eta, "lr": lr,
+            "finite": finite, "batch": (o, d, target, bg)}
+
+
+def save_nonfinite_step(run, step: int, out: dict, model, occ, gamma: float) -> Path:
+    """``nonfinite-step-{step}.pt`` in the run folder: what reproduces a skipped step
+    (the model and training occupancy before it, gamma, the batch's rays), read back with
+    ``torch.load(path, weights_only=True)``."""
+    from ..atomic import atomic_write
+
+    o, d, target, bg = out["batch"]
+    path = run.dir / f"nonfinite-step-{step}.pt"
+    state = {"step": step, "model": model.state_dict(), "occ_binary": occ.binary,
+             "gamma": float(gamma), "origins": o, "dirs": d, "target": target,
+             "background": bg}
+    atomic_write(path, lambda tmp: torch.save(state, tmp))
+    return path
 
 
 def next_rays(n_rays: int, n_samples: int, tcfg: TrainConfig) -> int:
@@ -358,11 +395,25 @@ def next_rays(n_rays: int, n_samples: int, tcfg: TrainConfig) -> int:
     return int(min(tcfg.max_rays, max(64, n_rays * tcfg.target_samples / max(1, n_samples))))
 
 
-def _loop(model, opt, occ, gamma, start, sampler, tcfg, run, progress, on_step=None):
-    n_rays = min(tcfg.max_rays, 1024)
+def _loop(model, opt, occ, gamma, start, sampler, tcfg, run, progress, on_step=None,
+          skipped: int = 0):
+    n_rays, in_a_row = min(tcfg.max_rays, 1024), 0
     for step in run.steps(start, tcfg.iterations, tcfg.log_every, tcfg.checkpoint_every,
                           "train", progress):
         out = train_step(model, opt, occ, gamma, n_rays, step, sampler, tcfg)
+        if out["finite"]:
+            in_a_row = 0
+        else:
+            skipped, in_a_row = skipped + 1, in_a_row + 1
+            if skipped == 1:
+                path = save_nonfinite_step(run, step, out, model, occ, gamma)
+                run.bar.write(f"step {step}: loss or gradients not finite, step skipped "
+                              f"(the count is logged as 'skipped'; reproduce it from {path})")
+            if in_a_row >= MAX_NONFINITE_IN_A_ROW:
+                raise RuntimeError(
+                    f"{run.dir}: {in_a_row} training steps in a row up to step {step} had a "
+                    "loss or gradients that were not finite, each skipped; the checkpoint "
+                    "holds the last finite model")
         loss, n_bar, n_samples, lr, eta = (out[k] for k in ("loss", "n_bar", "n_samples", "lr",
                                                             "eta"))
         gamma = tune_gamma(gamma, n_bar, tcfg)
@@ -374,8 +425,9 @@ def _loop(model, opt, occ, gamma, start, sampler, tcfg, run, progress, on_step=N
         run.after_step(step, lambda: {
             "loss": float(loss), "psnr": psnr, "gamma": gamma,
             "samples_per_ray": n_bar, "rays": n_rays_used, "samples": n_samples, "eta": eta,
-            "lr": lr, "occupied": float(occ.binary.float().mean())},
+            "lr": lr, "occupied": float(occ.binary.float().mean()), "skipped": skipped},
             lambda: {"model": model.state_dict(), "optimizer": opt.state_dict(),
-                     "occ_ema": occ.ema, "occ_binary": occ.binary, "gamma": float(gamma)})
+                     "occ_ema": occ.ema, "occ_binary": occ.binary, "gamma": float(gamma),
+                     "skipped": skipped})
         if on_step is not None:
             on_step(step, model, occ, gamma)
