@@ -177,6 +177,22 @@ def test_composite_matches_sequential_loop():
         np.testing.assert_allclose(w[ids == r].numpy(), ref, rtol=1e-5, atol=1e-7)
 
 
+def test_an_infinite_optical_depth_stops_its_ray_and_no_other():
+    """A sample whose density overflows float32 (sigma = inf) is opaque: its ray's weights
+    end there and the other rays of the batch keep the weights they have without it (the
+    packed running sum would otherwise give inf - inf = NaN to every later ray)."""
+    ids = torch.tensor([0, 0, 1, 1, 1, 2, 2])
+    sigma = torch.tensor([1.0, 2.0, 3.0, float("inf"), 4.0, 5.0, 6.0])
+    delta = torch.full((7,), 0.1)
+    w = ops.composite_weights(sigma, delta, ids, 3)
+    assert bool(torch.isfinite(w).all())
+    T1 = math.exp(-0.3)
+    torch.testing.assert_close(w[2:5], torch.tensor([1 - T1, T1, 0.0]), rtol=1e-6, atol=0)
+    keep = ids != 1
+    torch.testing.assert_close(w[keep], ops.composite_weights(sigma[keep], delta[keep],
+                                                              torch.tensor([0, 0, 2, 2]), 3))
+
+
 @pytest.mark.parametrize("unbounded", [False, True])
 def test_distortion_loss_matches_pairwise_sum(unbounded):
     """Eq. S2 summed over all pairs: on lattice intervals [k*s, (k+1)*s] (bounded), on

@@ -230,6 +230,9 @@ def lattice_samples(origins: torch.Tensor, dirs: torch.Tensor, occupancy: torch.
     return ray_ids, k, t, delta, u
 
 
+MAX_OPTICAL_DEPTH = 1e4      # exp(-1e4) underflows to 0 in float64
+
+
 def _segment_exclusive_cumsum(x: torch.Tensor, ray_ids: torch.Tensor, n_rays: int):
     """Per-ray exclusive cumulative sum of packed values x (M,) (float64 accumulation)."""
     cs = torch.cumsum(x.double(), 0)
@@ -246,8 +249,12 @@ def composite_weights(sigma: torch.Tensor, delta: torch.Tensor, ray_ids: torch.T
     ``alpha = 1 - exp(-sigma * delta)``; ``T_i = prod_{j<i} (1 - alpha_j)`` within the ray.
     With ``t_stop`` a sample counts only while ``T_i >= t_stop`` (the renderer's early stop).
     With ``return_T`` also returns the transmittance ``T_i`` (M,) in front of each sample.
+    The optical depth ``sigma * delta`` is capped at :data:`MAX_OPTICAL_DEPTH`, where
+    ``exp(-tau)`` is 0 in float64 already: the same weights and gradients (to the float64
+    rounding of the batch's running sum), where one infinite depth (a density that
+    overflows float32) would make that sum ``inf - inf`` and every later ray NaN.
     """
-    tau = sigma * delta
+    tau = torch.clamp(sigma * delta, max=MAX_OPTICAL_DEPTH)
     T = torch.exp(-_segment_exclusive_cumsum(tau, ray_ids, n_rays)).to(sigma.dtype)
     w = T * (1.0 - torch.exp(-tau))
     if t_stop is not None:
