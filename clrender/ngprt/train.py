@@ -26,6 +26,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from ..atomic import atomic_write
 from ..runs import RunFolder, mse_psnr, pick_device, set_lr, training_data
 from . import engine as engines
 from . import torch_ops as ops
@@ -325,9 +326,9 @@ MAX_NONFINITE_IN_A_ROW = 50     # skipped steps in a row after which a run stops
 
 
 def finite_step(loss: torch.Tensor, params) -> bool:
-    """Whether ``loss`` and the gradients of ``params`` are all finite (one fused norm over
-    the gradients, ~2 ms a step for the ``cpu`` preset's 10.5M parameters on one core; a
-    norm that overflows float32 counts as not finite)."""
+    """Whether ``loss`` and the gradients of ``params`` are all finite: one fused norm over
+    the gradients, a single read of each (its cost: docs/training.md, "Steps that are not
+    finite"); a norm that overflows float32 counts as not finite."""
     grads = [p.grad for p in params if p.grad is not None]
     return bool(torch.isfinite(loss)) and bool(
         torch.isfinite(torch.nn.utils.get_total_norm(grads, foreach=True)))
@@ -377,10 +378,8 @@ def train_step(model, opt, occ, gamma: float, n_rays: int, step: int, sampler, t
 
 def save_nonfinite_step(run, step: int, out: dict, model, occ, gamma: float) -> Path:
     """``nonfinite-step-{step}.pt`` in the run folder: what reproduces a skipped step
-    (the model and training occupancy before it, gamma, the batch's rays), read back with
-    ``torch.load(path, weights_only=True)``."""
-    from ..atomic import atomic_write
-
+    (the model it left unchanged, the training occupancy it marched, gamma, the batch's
+    rays), read back with ``torch.load(path, weights_only=True)``."""
     o, d, target, bg = out["batch"]
     path = run.dir / f"nonfinite-step-{step}.pt"
     state = {"step": step, "model": model.state_dict(), "occ_binary": occ.binary,
