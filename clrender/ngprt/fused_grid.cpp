@@ -241,10 +241,21 @@ constexpr int64_t AUX_CHUNK = 2048;
 // Corners whose features the forward looks up before their MLPs.
 constexpr int64_t AUX_BLOCK = 64;
 // The MLP's sizes padded with zero weights (exact: a padded unit's pre-activation is 0,
-// so relu keeps it 0 and masks its gradient), in 16-float vectors (GCC vector types: one
-// AVX-512 register, two AVX2 ones): the hidden layer is 4 vectors, the output 1.
-constexpr int64_t PI = 32, PH = 64, PO = 16, V = 16;
-typedef float v16 __attribute__((vector_size(64)));
+// so relu keeps it 0 and masks its gradient), in vectors of V floats, the target's widest
+// (GCC vector types: wider ones are split into the target's with values passed through
+// the stack, and compared a float at a time). A float's operations and their order do not
+// depend on V, so neither do the results.
+constexpr int64_t PI = 32, PH = 64, PO = 16;
+#if defined(__AVX512F__)
+constexpr int64_t V = 16;
+#elif defined(__AVX__)
+constexpr int64_t V = 8;
+#else
+constexpr int64_t V = 4;
+#endif
+typedef float vf __attribute__((vector_size(V * 4)));
+constexpr int64_t HV = PH / V, OV = PO / V;         // the hidden layer's vectors, the output's
+static_assert(PI % V == 0 && PH % V == 0 && PO % V == 0, "the padded sizes are whole vectors");
 // Independent partial sums of the MLP's long dot products (PH a multiple of it).
 constexpr int ACC = 4;
 static_assert(ACC == 4 && PH % ACC == 0, "output() and input_grad() add four partial sums");
@@ -253,8 +264,8 @@ static_assert(ACC == 4 && PH % ACC == 0, "output() and input_grad() add four par
 constexpr int GROUP = 4;
 
 struct Mlp {
-    v16 w0[PI][PH / V], b0[PH / V], w1[PH], b1;       // x @ w + b: w0[i] the row of input i
-    v16 w1t[PO][PH / V], w0t[PH][PI / V];             // transposed: w1t[k] the column k
+    vf w0[PI][HV], b0[HV], w1[PH][OV], b1[OV];        // x @ w + b: w0[i] the row of input i
+    vf w1t[PO][HV], w0t[PH][PI / V];                  // transposed: w1t[k] the column k
     int64_t I, H, O;
 
     Mlp(const torch::Tensor& W0, const torch::Tensor& B0, const torch::Tensor& W1,
@@ -268,37 +279,40 @@ struct Mlp {
             b0[j / V][j % V] = c0[j];
             for (int64_t i = 0; i < I; ++i)
                 w0t[j][i / V][i % V] = w0[i][j / V][j % V] = a0[i * H + j];
-            for (int64_t k = 0; k < O; ++k) w1t[k][j / V][j % V] = w1[j][k] = a1[j * O + k];
+            for (int64_t k = 0; k < O; ++k)
+                w1t[k][j / V][j % V] = w1[j][k / V][k % V] = a1[j * O + k];
         }
-        for (int64_t k = 0; k < O; ++k) b1[k] = c1[k];
+        for (int64_t k = 0; k < O; ++k) b1[k / V][k % V] = c1[k];
     }
 
     // h = relu(x @ w0 + b0) for x (I)
-    void hidden(const float* x, v16* h) const {
-        for (int q = 0; q < PH / V; ++q) h[q] = b0[q];
+    void hidden(const float* x, vf* h) const {
+        for (int q = 0; q < HV; ++q) h[q] = b0[q];
         for (int64_t i = 0; i < I; ++i)
-            for (int q = 0; q < PH / V; ++q) h[q] += x[i] * w0[i][q];
-        for (int q = 0; q < PH / V; ++q) h[q] = h[q] > 0.0f ? h[q] : 0.0f;
+            for (int q = 0; q < HV; ++q) h[q] += x[i] * w0[i][q];
+        for (int q = 0; q < HV; ++q) h[q] = h[q] > 0.0f ? h[q] : 0.0f;
     }
 
-    // h @ w1 + b1, in ACC interleaved sums (one chain of 64 fused multiply-adds would
-    // wait on each one's latency)
-    v16 output(const v16* h) const {
+    // y = h @ w1 + b1 (OV vectors), in ACC interleaved sums (one chain of 64 fused
+    // multiply-adds would wait on each one's latency)
+    void output(const vf* h, vf* y) const {
         float hs[PH];                          // scalars to broadcast
         std::memcpy(hs, h, sizeof(hs));
-        v16 o[ACC] = {b1};
-        for (int64_t j = 0; j < PH; j += ACC)
-            for (int a = 0; a < ACC; ++a) o[a] += hs[j + a] * w1[j + a];
-        return (o[0] + o[1]) + (o[2] + o[3]);
+        for (int r = 0; r < OV; ++r) {
+            vf o[ACC] = {b1[r]};
+            for (int64_t j = 0; j < PH; j += ACC)
+                for (int a = 0; a < ACC; ++a) o[a] += hs[j + a] * w1[j + a][r];
+            y[r] = (o[0] + o[1]) + (o[2] + o[3]);
+        }
     }
 
     // (x's gradient) gh @ w0^T for gh (H) into dx (the first PI / V vectors up to I),
     // ACC interleaved sums as output()
-    void input_grad(const v16* gh, v16* dx) const {
+    void input_grad(const vf* gh, vf* dx) const {
         float ghs[PH];
         std::memcpy(ghs, gh, sizeof(ghs));
         for (int q = 0; q < (I + V - 1) / V; ++q) {
-            v16 d[ACC] = {};
+            vf d[ACC] = {};
             for (int64_t j = 0; j < PH; j += ACC)
                 for (int a = 0; a < ACC; ++a) d[a] += ghs[j + a] * w0t[j + a][q];
             dx[q] = (d[0] + d[1]) + (d[2] + d[3]);
@@ -332,15 +346,15 @@ std::vector<torch::Tensor> aux_forward(torch::Tensor tables, torch::Tensor u,
         // grid_forward does; only the MLP below fuses its multiply-adds.
         CornerRing<0> ring(lv, 0, n_lev, tab, T, F, up, begin, end);
         float block[AUX_BLOCK * PI];   // the features of a block of corners, unless kept
-        v16 h[PH / V];
+        vf h[HV], y[OV];
         for (int64_t n0 = begin; n0 < end; n0 += AUX_BLOCK) {
             const int64_t n1 = std::min(end, n0 + AUX_BLOCK);
             float* x = keep_x ? xp + n0 * I : block;
             lookup_block(ring, n_lev, tab, T, F, n0, n1, x);
             for (int64_t n = n0; n < n1; ++n, x += I) {
                 mlp.hidden(x, h);
-                const v16 y = mlp.output(h);
-                for (int64_t k = 0; k < O; ++k) o[n * O + k] = y[k];
+                mlp.output(h, y);
+                for (int64_t k = 0; k < O; ++k) o[n * O + k] = y[k / V][k % V];
             }
         }
     });
@@ -365,7 +379,7 @@ std::vector<torch::Tensor> aux_backward(torch::Tensor g, torch::Tensor xs, torch
     const int64_t n_chunks = (M + AUX_CHUNK - 1) / AUX_CHUNK;
     auto gx = torch::empty({M, n_lev, F}, g.options());
     struct Part {                      // one chunk's weight gradient, padded
-        v16 w0[PI][PH / V], b0[PH / V], w1[PH], b1;
+        vf w0[PI][HV], b0[HV], w1[PH][OV], b1[OV];
     };
     std::vector<Part> part(n_chunks);
     const float* xp = xs.data_ptr<float>();
@@ -375,7 +389,7 @@ std::vector<torch::Tensor> aux_backward(torch::Tensor g, torch::Tensor xs, torch
     at::parallel_for(0, n_chunks, 1, [&](int64_t c0, int64_t c1) {
         // per corner of a group: its features, hidden layer, output and hidden gradients
         float x[GROUP][PI], hs[GROUP][PH];
-        v16 h[PH / V], gh[GROUP][PH / V], go[GROUP], dx[PI / V];
+        vf h[HV], gh[GROUP][HV], go[GROUP][OV], dx[PI / V];
         for (int64_t c = c0; c < c1; ++c) {
             Part& d = part[c];           // zero-initialised by the vector
             const int64_t end = std::min(M, (c + 1) * AUX_CHUNK);
@@ -385,36 +399,39 @@ std::vector<torch::Tensor> aux_backward(torch::Tensor g, torch::Tensor xs, torch
                     if (n >= end) {      // past the chunk: zero rows add nothing
                         std::memset(x[g], 0, sizeof(x[g]));
                         std::memset(hs[g], 0, sizeof(hs[g]));
-                        go[g] = v16{};
-                        for (int q = 0; q < PH / V; ++q) gh[g][q] = v16{};
+                        for (int r = 0; r < OV; ++r) go[g][r] = vf{};
+                        for (int q = 0; q < HV; ++q) gh[g][q] = vf{};
                         continue;
                     }
                     for (int64_t i = 0; i < I; ++i) x[g][i] = xp[n * I + i];
                     mlp.hidden(x[g], h);
                     std::memcpy(hs[g], h, sizeof(h));
-                    go[g] = v16{};
-                    for (int64_t k = 0; k < O; ++k) go[g][k] = gp[n * O + k];
-                    for (int q = 0; q < PH / V; ++q) gh[g][q] = v16{};
+                    for (int r = 0; r < OV; ++r) go[g][r] = vf{};
+                    for (int64_t k = 0; k < O; ++k) go[g][k / V][k % V] = gp[n * O + k];
+                    for (int q = 0; q < HV; ++q) gh[g][q] = vf{};
                     for (int64_t k = 0; k < O; ++k)
-                        for (int q = 0; q < PH / V; ++q) gh[g][q] += go[g][k] * mlp.w1t[k][q];
-                    for (int q = 0; q < PH / V; ++q)   // relu's mask
+                        for (int q = 0; q < HV; ++q)
+                            gh[g][q] += go[g][k / V][k % V] * mlp.w1t[k][q];
+                    for (int q = 0; q < HV; ++q)       // relu's mask
                         gh[g][q] = h[q] > 0.0f ? gh[g][q] : 0.0f;
                     mlp.input_grad(gh[g], dx);
                     for (int64_t i = 0; i < I; ++i) gxp[n * I + i] = dx[i / V][i % V];
                 }
                 // The group's weight gradients: each accumulator row loaded and stored
                 // once (h 0 where relu cut: a zero row, as torch's).
-                for (int g = 0; g < GROUP; ++g) d.b1 += go[g];
-                for (int64_t j = 0; j < H; ++j) {
-                    v16 a = d.w1[j];
-                    for (int g = 0; g < GROUP; ++g) a += hs[g][j] * go[g];
-                    d.w1[j] = a;
-                }
-                for (int q = 0; q < PH / V; ++q)
+                for (int r = 0; r < OV; ++r)
+                    for (int g = 0; g < GROUP; ++g) d.b1[r] += go[g][r];
+                for (int64_t j = 0; j < H; ++j)
+                    for (int r = 0; r < OV; ++r) {
+                        vf a = d.w1[j][r];
+                        for (int g = 0; g < GROUP; ++g) a += hs[g][j] * go[g][r];
+                        d.w1[j][r] = a;
+                    }
+                for (int q = 0; q < HV; ++q)
                     for (int g = 0; g < GROUP; ++g) d.b0[q] += gh[g][q];
                 for (int64_t i = 0; i < I; ++i)
-                    for (int q = 0; q < PH / V; ++q) {
-                        v16 a = d.w0[i][q];
+                    for (int q = 0; q < HV; ++q) {
+                        vf a = d.w0[i][q];
                         for (int g = 0; g < GROUP; ++g) a += x[g][i] * gh[g][q];
                         d.w0[i][q] = a;
                     }
@@ -424,19 +441,21 @@ std::vector<torch::Tensor> aux_backward(torch::Tensor g, torch::Tensor xs, torch
     Part sum = {};                     // the chunks in order
     for (const Part& d : part) {
         for (int64_t i = 0; i < PI; ++i)
-            for (int q = 0; q < PH / V; ++q) sum.w0[i][q] += d.w0[i][q];
-        for (int q = 0; q < PH / V; ++q) sum.b0[q] += d.b0[q];
-        for (int64_t j = 0; j < PH; ++j) sum.w1[j] += d.w1[j];
-        sum.b1 += d.b1;
+            for (int q = 0; q < HV; ++q) sum.w0[i][q] += d.w0[i][q];
+        for (int q = 0; q < HV; ++q) sum.b0[q] += d.b0[q];
+        for (int64_t j = 0; j < PH; ++j)
+            for (int r = 0; r < OV; ++r) sum.w1[j][r] += d.w1[j][r];
+        for (int r = 0; r < OV; ++r) sum.b1[r] += d.b1[r];
     }
     auto gw0 = torch::empty({I, H}, g.options()), gb0 = torch::empty({H}, g.options());
     auto gw1 = torch::empty({H, O}, g.options()), gb1 = torch::empty({O}, g.options());
     for (int64_t j = 0; j < H; ++j) {
         gb0.data_ptr<float>()[j] = sum.b0[j / V][j % V];
         for (int64_t i = 0; i < I; ++i) gw0.data_ptr<float>()[i * H + j] = sum.w0[i][j / V][j % V];
-        for (int64_t k = 0; k < O; ++k) gw1.data_ptr<float>()[j * O + k] = sum.w1[j][k];
+        for (int64_t k = 0; k < O; ++k)
+            gw1.data_ptr<float>()[j * O + k] = sum.w1[j][k / V][k % V];
     }
-    for (int64_t k = 0; k < O; ++k) gb1.data_ptr<float>()[k] = sum.b1[k];
+    for (int64_t k = 0; k < O; ++k) gb1.data_ptr<float>()[k] = sum.b1[k / V][k % V];
     auto acc = torch::zeros({n_lev, T, F}, g.options());
     float* a = acc.data_ptr<float>();
     at::parallel_for(0, n_lev, 1, [&](int64_t begin, int64_t end) {
