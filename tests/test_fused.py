@@ -178,6 +178,15 @@ def test_fused_lookup_refuses_bad_input():
         fused.grid_lookup(tables.double(), u, res, dense)
 
 
+def test_the_build_is_named_by_its_source_and_flags():
+    """Checkouts of one source share a build; another source or flags get their own."""
+    source = fused.SOURCE.read_bytes()
+    name = fused.build_name(source)
+    assert name.isidentifier() and name == fused.build_name(bytes(source))
+    assert fused.build_name(source + b"\n") != name
+    assert fused.build_name(source, [*fused.CFLAGS, "-g"]) != name
+
+
 def test_first_step_loss_and_gradients_agree_across_engines(tmp_path):
     """One batch of a `tiny` model through both engines: the loss within 1e-6 relative
     and every parameter gradient within 1e-5 of its largest magnitude (the lookups' values

@@ -7,8 +7,8 @@ backward recomputes it from the stored features), :func:`coarse_corners` (bit fo
 step lattice's occupied points, bit for bit).
 
 The extension is compiled with the machine's C++ compiler at first use
-(``torch.utils.cpp_extension.load``, cached by torch under ``$TORCH_EXTENSIONS_DIR``;
-:func:`build` reports the seconds it took) and runs on torch's intra-op threads
+(``torch.utils.cpp_extension.load``, cached by torch under ``$TORCH_EXTENSIONS_DIR`` in a
+folder named by :func:`build_name`; :func:`build` reports the seconds it took) and runs on torch's intra-op threads
 (``torch.set_num_threads``). Values: the reference's float32 operations in its order
 (the gather's sums may round differently from ``embedding_bag``'s, bounded in
 ``tests/test_fused.py``); table gradients: bit-identical to the reference's bincount
@@ -20,6 +20,7 @@ weight gradient summed per fixed chunk of corners, the chunks in order).
 from __future__ import annotations
 
 import functools
+import hashlib
 import time
 from pathlib import Path
 
@@ -32,13 +33,21 @@ SOURCE = Path(__file__).resolve().parent / "fused_grid.cpp"
 CFLAGS = ["-O3", "-march=native", "-ffp-contract=off", "-fopenmp"]
 
 
+def build_name(source: bytes, cflags=CFLAGS) -> str:
+    """The extension's name, from a hash of its source, flags and torch version: checkouts of
+    the same code share one build, and one of other code never rebuilds it (nor waits on
+    its build's lock)."""
+    key = hashlib.sha256(source + " ".join(cflags).encode() + torch.__version__.encode())
+    return f"clrender_fused_grid_{key.hexdigest()[:12]}"
+
+
 @functools.lru_cache(maxsize=None)
 def _extension():
     from torch.utils.cpp_extension import load
 
     t0 = time.perf_counter()
-    ext = load(name="clrender_fused_grid", sources=[str(SOURCE)], extra_cflags=CFLAGS,
-               extra_ldflags=["-fopenmp"], verbose=False)
+    ext = load(name=build_name(SOURCE.read_bytes()), sources=[str(SOURCE)],
+               extra_cflags=CFLAGS, extra_ldflags=["-fopenmp"], verbose=False)
     return ext, time.perf_counter() - t0
 
 
