@@ -8,10 +8,10 @@ step lattice's occupied points, bit for bit).
 
 The extension is compiled with the machine's C++ compiler at first use
 (``torch.utils.cpp_extension.load``, cached by torch under ``$TORCH_EXTENSIONS_DIR`` in a
-folder named by :func:`build_name`; :func:`build` reports the seconds it took) and runs on torch's intra-op threads
-(``torch.set_num_threads``). Values: the reference's float32 operations in its order
-(the gather's sums may round differently from ``embedding_bag``'s, bounded in
-``tests/test_fused.py``); table gradients: bit-identical to the reference's bincount
+folder named by :func:`build_name`; :func:`build` reports the seconds it took) and runs
+on torch's intra-op threads (``torch.set_num_threads``). Values: the reference's float32
+operations in its order (the gather's sums may round differently from ``embedding_bag``'s,
+bounded in ``tests/test_fused.py``); table gradients: bit-identical to the reference's bincount
 (float32 sums in the same order), deterministic for any thread count. The auxiliary
 MLP rounds differently from torch's matmuls (fused multiply-adds, its own summation
 order; bounded in ``tests/test_fused.py``), deterministic for any thread count (its
