@@ -371,6 +371,61 @@ def test_train_resume_and_bake(tmp_path, small_run_inputs, monkeypatch):
     assert model.background == (1.0, 1.0, 1.0)
 
 
+def _poisoned_shader(monkeypatch, bad_calls: set) -> None:
+    """NDRFShader's output NaN at its calls numbered in ``bad_calls`` (0-based)."""
+    from clrender.ndrf.shader_torch import NDRFShader
+
+    forward, calls = NDRFShader.forward, []
+
+    def poisoned(self, *args, **kwargs):
+        out = forward(self, *args, **kwargs)
+        calls.append(1)
+        return out * float("nan") if len(calls) - 1 in bad_calls else out
+
+    monkeypatch.setattr(NDRFShader, "forward", poisoned)
+
+
+@pytest.mark.slow
+def test_a_nonfinite_step_is_skipped_as_in_every_method(tmp_path, small_run_inputs,
+                                                        monkeypatch):
+    """NDRF's steps pass the shell's guard (clrender.runs): a step whose loss and gradients
+    are NaN leaves the features and conv weights as they were, is counted in the log and the
+    checkpoint, and is saved to reproduce it; the steps around it train. A run of such
+    steps stops with an error."""
+    from clrender import runs
+    from clrender.ndrf import train as ndrf_train
+
+    teacher, ds = small_run_inputs
+    tcfg = replace(ndrf_train.TRAIN_PRESETS["tiny"], iterations=5, n_distill=4,
+                   checkpoint_every=10, log_every=1, patch=8)
+    _poisoned_shader(monkeypatch, {2})       # one forward a step (patches, no hook bake)
+    states = {}
+
+    def hook(step, bake):
+        states[step] = {k: v.copy() for k, v in bake().arrays.items()}
+
+    run = ndrf_train.train(ds, tmp_path / "run", teacher, preset="tiny", progress=False,
+                           train_config=tcfg, on_step=hook)
+    assert all(np.array_equal(states[2][k], states[1][k]) for k in states[1])
+    assert any(not np.array_equal(states[3][k], states[2][k]) for k in states[2])
+    ckpt = torch.load(run / "checkpoint.pt", weights_only=True)
+    assert ckpt["skipped"] == 1
+    assert all(bool(torch.isfinite(v).all()) for v in ckpt["model"].values())
+    log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
+    assert [r["skipped"] for r in log] == [0, 0, 1, 1, 1]
+    saved = torch.load(run / "nonfinite-step-2.pt", weights_only=True)
+    assert saved["step"] == 2 and len(saved["window"]) == 4
+    assert (saved["phase"], saved["view"]) == (log[2]["phase"], log[2]["view"])
+    assert np.array_equal(saved["model"]["features.0"].numpy(), states[1]["features_0"])
+
+    monkeypatch.undo()
+    monkeypatch.setattr(runs, "MAX_NONFINITE_IN_A_ROW", 3)
+    _poisoned_shader(monkeypatch, {1, 3, 4, 5})
+    with pytest.raises(RuntimeError, match="3 training steps in a row up to step 5"):
+        ndrf_train.train(ds, tmp_path / "run_b", teacher, preset="tiny", progress=False,
+                         train_config=replace(tcfg, iterations=8))
+
+
 @pytest.mark.slow
 def test_patch_covering_the_image_trains_on_full_frames(tmp_path, small_run_inputs):
     # The `cpu` preset's 200x200 patch on the built-in scene's 200x200 frames: the full-frame

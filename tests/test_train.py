@@ -549,12 +549,13 @@ def test_a_step_with_a_nonfinite_loss_is_skipped_counted_and_saved(tmp_path, mon
 
 def test_a_run_of_nonfinite_steps_stops_with_an_error(tmp_path, monkeypatch):
     """MAX_NONFINITE_IN_A_ROW skipped steps in a row stop the run with an error naming it."""
+    from clrender import runs
     from clrender.data import make_scene
     from clrender.ngprt import train as ngprt_train
 
     data = make_scene("bounded", tmp_path / "scene", seed=0, n_train=4, n_test=1, width=16,
                       height=16)
-    monkeypatch.setattr(ngprt_train, "MAX_NONFINITE_IN_A_ROW", 3)
+    monkeypatch.setattr(runs, "MAX_NONFINITE_IN_A_ROW", 3)
     _poisoned_render(monkeypatch, {1, 3, 4, 5})
     with pytest.raises(RuntimeError, match="3 training steps in a row up to step 5"):
         ngprt_train.train(data, tmp_path / "run", preset="tiny", iterations=8, device="cpu",

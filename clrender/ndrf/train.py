@@ -17,7 +17,10 @@ decaying exponentially from 1e-3 to 1e-5 (the paper; the short CPU presets from 
 A run folder (:class:`clrender.runs.RunFolder`) holds ``config.json`` (``"method":
 "ndrf"``, the NDRF, training and extraction configs, data and teacher, seed),
 ``meshes/``, ``distill.npz``,
-``checkpoint.pt`` (features, conv weights, optimiser state, step) and ``log.jsonl``.
+``checkpoint.pt`` (features, conv weights, optimiser state, step, steps skipped) and
+``log.jsonl``. A step whose loss or gradients are not finite is skipped, as in every
+method (:mod:`clrender.runs`); its ``nonfinite-step-N.pt`` holds the model, the phase,
+the view and its window (y0, x0, height, width).
 
 Examples:
     >>> run = train("/tmp/scn_b", "/tmp/ndrf_b", teacher="/tmp/teacher.npz", preset="cpu")
@@ -35,7 +38,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..runs import RunFolder, mse_psnr, pick_device, set_lr
+from ..runs import RunFolder, finite_step, mse_psnr, pick_device, set_lr
 from .baked import NDRFModel, save_baked, validate
 from .config import NDRFConfig, preset as ndrf_preset
 from .init import initial_model, load_meshes
@@ -298,7 +301,11 @@ def _loop(shader, opt, views, bg, start, tcfg, seed, run, progress, on_step=None
         loss = F.mse_loss(rgb, target)
         opt.zero_grad(set_to_none=True)
         loss.backward()
-        opt.step()
+        finite = finite_step(loss, shader.parameters())
+        if finite:
+            opt.step()
+        run.count_step(step, finite, lambda: {"model": shader.state_dict(), "phase": phase,
+                                              "view": i, "window": [y0, x0, ph, pw]})
         mse = float(loss.detach())
         psnr = mse_psnr(mse)
         run.bar.set_postfix(phase=phase, psnr=f"{psnr:.2f}")

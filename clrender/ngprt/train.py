@@ -4,10 +4,9 @@ A run folder (:class:`clrender.runs.RunFolder`) holds ``config.json`` (``"method
 "ngprt"``, model config, train config, data path),
 ``checkpoint.pt`` (model, optimizer, training occupancy, gamma, step, steps skipped) and
 ``log.jsonl`` (one JSON line per logged step: loss, psnr, gamma, samples per ray, rays, eta,
-lr, steps skipped). A step whose loss or gradients are not finite is skipped (no optimiser
-step, so a run is never poisoned), counted in the log and, the first time, its batch and
-model saved to ``nonfinite-step-N.pt`` to reproduce it; a run that skips
-:data:`MAX_NONFINITE_IN_A_ROW` steps in a row stops with an error.
+lr, steps skipped). A step whose loss or gradients are not finite is skipped, as in every
+method (:mod:`clrender.runs`); its ``nonfinite-step-N.pt`` holds the model, the training
+occupancy, gamma and the batch's rays.
 
 Examples:
     >>> run = train("/tmp/scn_b", "/tmp/run_b", preset="cpu", variant="separate-v", L=2)
@@ -26,8 +25,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..atomic import atomic_write
-from ..runs import RunFolder, mse_psnr, pick_device, set_lr, training_data
+from ..runs import RunFolder, finite_step, mse_psnr, pick_device, set_lr, training_data
 from . import engine as engines
 from . import torch_ops as ops
 from .config import ModelConfig, preset as model_preset
@@ -301,15 +299,14 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
                     free=("engine",))
     model = NGPRT(cfg, engine).to(dev)
     opt = make_optimizer(model, tcfg)
-    occ, gamma, start, skipped = OccupancyGrid(cfg, dev), tcfg.gamma_init, 0, 0
+    occ, gamma, start = OccupancyGrid(cfg, dev), tcfg.gamma_init, 0
     state = run.resume(model, opt, dev)
     if state is not None:
         occ.ema, occ.binary = state["occ_ema"].to(dev), state["occ_binary"].to(dev)
         gamma, start = float(state["gamma"]), int(state["step"])
-        skipped = int(state.get("skipped", 0))
     run.write_config()
     _loop(model, opt, occ, gamma, start, RaySampler(ds, dev, getattr(ds, "alpha", None)), tcfg,
-          run, progress, on_step, skipped)
+          run, progress, on_step)
     return run.dir
 
 
@@ -320,18 +317,6 @@ def make_optimizer(model: NGPRT, tcfg: TrainConfig) -> torch.optim.Adam:
     cpu = all(p.device.type == "cpu" for p in model.parameters())
     return torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas),
                             eps=tcfg.eps, fused=True if cpu else None)
-
-
-MAX_NONFINITE_IN_A_ROW = 50     # skipped steps in a row after which a run stops
-
-
-def finite_step(loss: torch.Tensor, params) -> bool:
-    """Whether ``loss`` and the gradients of ``params`` are all finite: one fused norm over
-    the gradients, a single read of each (its cost: docs/training.md, "Steps that are not
-    finite"); a norm that overflows float32 counts as not finite."""
-    grads = [p.grad for p in params if p.grad is not None]
-    return bool(torch.isfinite(loss)) and bool(
-        torch.isfinite(torch.nn.utils.get_total_norm(grads, foreach=True)))
 
 
 def train_step(model, opt, occ, gamma: float, n_rays: int, step: int, sampler, tcfg) -> dict:
@@ -376,17 +361,12 @@ def train_step(model, opt, occ, gamma: float, n_rays: int, step: int, sampler, t
             "finite": finite, "batch": (o, d, target, bg)}
 
 
-def save_nonfinite_step(run, step: int, out: dict, model, occ, gamma: float) -> Path:
-    """``nonfinite-step-{step}.pt`` in the run folder: what reproduces a skipped step
-    (the model it left unchanged, the training occupancy it marched, gamma, the batch's
-    rays), read back with ``torch.load(path, weights_only=True)``."""
+def nonfinite_step_state(out: dict, model, occ, gamma: float) -> dict:
+    """What reproduces a skipped step (:meth:`clrender.runs.RunFolder.count_step`): the
+    model it left unchanged, the training occupancy it marched, gamma, the batch's rays."""
     o, d, target, bg = out["batch"]
-    path = run.dir / f"nonfinite-step-{step}.pt"
-    state = {"step": step, "model": model.state_dict(), "occ_binary": occ.binary,
-             "gamma": float(gamma), "origins": o, "dirs": d, "target": target,
-             "background": bg}
-    atomic_write(path, lambda tmp: torch.save(state, tmp))
-    return path
+    return {"model": model.state_dict(), "occ_binary": occ.binary, "gamma": float(gamma),
+            "origins": o, "dirs": d, "target": target, "background": bg}
 
 
 def next_rays(n_rays: int, n_samples: int, tcfg: TrainConfig) -> int:
@@ -394,25 +374,13 @@ def next_rays(n_rays: int, n_samples: int, tcfg: TrainConfig) -> int:
     return int(min(tcfg.max_rays, max(64, n_rays * tcfg.target_samples / max(1, n_samples))))
 
 
-def _loop(model, opt, occ, gamma, start, sampler, tcfg, run, progress, on_step=None,
-          skipped: int = 0):
-    n_rays, in_a_row = min(tcfg.max_rays, 1024), 0
+def _loop(model, opt, occ, gamma, start, sampler, tcfg, run, progress, on_step=None):
+    n_rays = min(tcfg.max_rays, 1024)
     for step in run.steps(start, tcfg.iterations, tcfg.log_every, tcfg.checkpoint_every,
                           "train", progress):
         out = train_step(model, opt, occ, gamma, n_rays, step, sampler, tcfg)
-        if out["finite"]:
-            in_a_row = 0
-        else:
-            skipped, in_a_row = skipped + 1, in_a_row + 1
-            if skipped == 1:
-                path = save_nonfinite_step(run, step, out, model, occ, gamma)
-                run.bar.write(f"step {step}: loss or gradients not finite, step skipped "
-                              f"(the count is logged as 'skipped'; reproduce it from {path})")
-            if in_a_row >= MAX_NONFINITE_IN_A_ROW:
-                raise RuntimeError(
-                    f"{run.dir}: {in_a_row} training steps in a row up to step {step} had a "
-                    "loss or gradients that were not finite, each skipped; the checkpoint "
-                    "holds the last finite model")
+        run.count_step(step, out["finite"],
+                       lambda: nonfinite_step_state(out, model, occ, gamma))
         loss, n_bar, n_samples, lr, eta = (out[k] for k in ("loss", "n_bar", "n_samples", "lr",
                                                             "eta"))
         gamma = tune_gamma(gamma, n_bar, tcfg)
@@ -424,9 +392,8 @@ def _loop(model, opt, occ, gamma, start, sampler, tcfg, run, progress, on_step=N
         run.after_step(step, lambda: {
             "loss": float(loss), "psnr": psnr, "gamma": gamma,
             "samples_per_ray": n_bar, "rays": n_rays_used, "samples": n_samples, "eta": eta,
-            "lr": lr, "occupied": float(occ.binary.float().mean()), "skipped": skipped},
+            "lr": lr, "occupied": float(occ.binary.float().mean())},
             lambda: {"model": model.state_dict(), "optimizer": opt.state_dict(),
-                     "occ_ema": occ.ema, "occ_binary": occ.binary, "gamma": float(gamma),
-                     "skipped": skipped})
+                     "occ_ema": occ.ema, "occ_binary": occ.binary, "gamma": float(gamma)})
         if on_step is not None:
             on_step(step, model, occ, gamma)
