@@ -9,10 +9,13 @@ Tolerances, stated before tuning:
 - the auxiliary NGP (encoding + MLP): outputs within 1e-5 of their largest magnitude,
   every gradient within 1e-5 of its largest magnitude (fused multiply-adds and another
   summation order than torch's matmuls; float32 sums of up to 3000 terms); bit for bit
-  the same for one thread and two (fixed chunks summed in order).
+  the same for one thread and two (fixed chunks summed in order); the same tolerance for a
+  build without AVX (4-float vectors, each product rounded).
 - the coarse corners and their de-duplication: bit for bit.
 - the bounded step lattice's occupied samples: bit for bit.
 """
+import platform
+
 import pytest
 import torch
 
@@ -176,6 +179,27 @@ def test_fused_lookup_refuses_bad_input():
         fused.grid_lookup(tables, u, res, [False, True, False])
     with pytest.raises(ValueError, match="float32 CPU tensors expected"):
         fused.grid_lookup(tables.double(), u, res, dense)
+
+
+@pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"),
+                    reason="-mno-avx is an x86 flag")
+def test_the_mlp_in_4_float_vectors_equals_torch():
+    """The auxiliary MLP built for an x86-64 CPU without AVX (4-float vectors, the width of
+    ARM's NEON; no FMA, so each product rounded) against the torch specification, values
+    and gradients within the tolerance above, as this machine's wider build."""
+    if fused.extension().AUX_VECTOR == 4:
+        pytest.skip("this machine's build is the 4-float one already (no AVX)")
+    narrow = fused.extension([*fused.CFLAGS, "-mno-avx"])
+    assert narrow.AUX_VECTOR == 4
+    tables, u, res, dense, on_vertices, w0, b0, w1, b1 = case = _aux_case(out=9)
+    g = torch.randn(3000, 9, generator=torch.Generator().manual_seed(2))
+    out, x = narrow.aux_forward(tables, u, res, dense, on_vertices, w0, b0, w1, b1, True)
+    got = [out, *narrow.aux_backward(g, x, tables, u, res, dense, on_vertices, w0, b0, w1, b1)]
+    params = [t.clone().requires_grad_() for t in (tables, w0, b0, w1, b1)]
+    ref_out = ops.aux_values(params[0], *case[1:5], *params[1:])
+    ref = [ref_out.detach(), *torch.autograd.grad(ref_out, params, g)]
+    for name, a, b in zip(("out", "tables", "w0", "b0", "w1", "b1"), got, ref):
+        torch.testing.assert_close(a, b, rtol=0, atol=1e-5 * float(b.abs().max()), msg=name)
 
 
 def test_the_build_is_named_by_its_source_and_flags():

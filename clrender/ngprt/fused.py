@@ -42,24 +42,30 @@ def build_name(source: bytes, cflags=CFLAGS) -> str:
 
 
 @functools.lru_cache(maxsize=None)
-def _extension():
+def _load(cflags: tuple):
     from torch.utils.cpp_extension import load
 
     t0 = time.perf_counter()
-    ext = load(name=build_name(SOURCE.read_bytes()), sources=[str(SOURCE)],
-               extra_cflags=CFLAGS, extra_ldflags=["-fopenmp"], verbose=False)
+    ext = load(name=build_name(SOURCE.read_bytes(), cflags), sources=[str(SOURCE)],
+               extra_cflags=list(cflags), extra_ldflags=["-fopenmp"], verbose=False)
     return ext, time.perf_counter() - t0
 
 
-def build() -> float:
+def extension(cflags=CFLAGS):
+    """The extension's module, built at first use; ``cflags`` other than the engine's
+    :data:`CFLAGS` are another build (a test's of a narrower target)."""
+    return _load(tuple(cflags))[0]
+
+
+def build(cflags=CFLAGS) -> float:
     """Build (or load the cached build of) the extension; seconds it took this process."""
-    return _extension()[1]
+    return _load(tuple(cflags))[1]
 
 
 class _GridLookup(torch.autograd.Function):
     @staticmethod
     def forward(ctx, tables, u, resolutions, dense, on_vertices):
-        ext = _extension()[0]
+        ext = extension()
         ctx.save_for_backward(u)
         ctx.args = (tables.shape[1], resolutions, dense, on_vertices)
         return ext.grid_forward(tables, u, resolutions, dense, on_vertices)
@@ -68,8 +74,8 @@ class _GridLookup(torch.autograd.Function):
     def backward(ctx, g):
         (u,) = ctx.saved_tensors
         T, resolutions, dense, on_vertices = ctx.args
-        grad = _extension()[0].grid_backward(g.contiguous(), u, T, resolutions, dense,
-                                             on_vertices)
+        grad = extension().grid_backward(g.contiguous(), u, T, resolutions, dense,
+                                         on_vertices)
         return grad, None, None, None, None
 
 
@@ -100,8 +106,8 @@ def _cpu_float32(name: str, **tensors) -> None:
 class _AuxValues(torch.autograd.Function):
     @staticmethod
     def forward(ctx, tables, u, resolutions, dense, on_vertices, w0, b0, w1, b1):
-        out, x = _extension()[0].aux_forward(tables, u, resolutions, dense, on_vertices,
-                                             w0, b0, w1, b1, any(ctx.needs_input_grad))
+        out, x = extension().aux_forward(tables, u, resolutions, dense, on_vertices,
+                                         w0, b0, w1, b1, any(ctx.needs_input_grad))
         ctx.save_for_backward(x, tables, u, w0, b0, w1, b1)    # x: the (N, I) features
         ctx.args = (resolutions, dense, on_vertices)
         return out
@@ -110,7 +116,7 @@ class _AuxValues(torch.autograd.Function):
     def backward(ctx, g):
         x, tables, u, w0, b0, w1, b1 = ctx.saved_tensors
         res, dense, on_vertices = ctx.args
-        gt, gw0, gb0, gw1, gb1 = _extension()[0].aux_backward(
+        gt, gw0, gb0, gw1, gb1 = extension().aux_backward(
             g.contiguous(), x, tables, u, res, dense, on_vertices, w0, b0, w1, b1)
         return gt, None, None, None, None, gw0, gb0, gw1, gb1
 
@@ -122,7 +128,7 @@ def aux_values(tables, u, resolutions, dense, on_vertices, w0, b0, w1, b1) -> to
     dense = [bool(d) for d in dense]
     if dense != sorted(dense, reverse=True):
         raise ValueError(f"aux_values: dense levels must come first, got {dense}")
-    sizes, most = (w0.shape[0], w0.shape[1], w1.shape[1]), _extension()[0].AUX_MAX
+    sizes, most = (w0.shape[0], w0.shape[1], w1.shape[1]), extension().AUX_MAX
     if any(n > m for n, m in zip(sizes, most)):
         raise ValueError(f"fused aux_values: the MLP {'->'.join(map(str, sizes))} is above "
                          f"the fused sizes {'->'.join(map(str, most))} (train it with "
@@ -136,7 +142,7 @@ def coarse_corners(u: torch.Tensor, res: int):
     """:func:`clrender.ngprt.torch_ops.coarse_corners`, fused (the same results, bit for
     bit: corners, idx, w)."""
     _cpu_float32("coarse_corners", u=u)
-    corners, idx, w = _extension()[0].coarse_corners(u.contiguous(), int(res))
+    corners, idx, w = extension().coarse_corners(u.contiguous(), int(res))
     return corners, idx, w
 
 
@@ -145,12 +151,12 @@ class _CornerGather(torch.autograd.Function):
     def forward(ctx, values, idx, w):
         ctx.save_for_backward(idx, w)
         ctx.rows = values.shape[0]
-        return _extension()[0].corner_forward(values, idx, w)
+        return extension().corner_forward(values, idx, w)
 
     @staticmethod
     def backward(ctx, g):
         idx, w = ctx.saved_tensors
-        return _extension()[0].corner_backward(g.contiguous(), idx, w, ctx.rows), None, None
+        return extension().corner_backward(g.contiguous(), idx, w, ctx.rows), None, None
 
 
 def corner_gather(values: torch.Tensor, idx: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
@@ -172,6 +178,6 @@ def lattice_samples(origins, dirs, occupancy, s: float, near: float, far: float,
     _cpu_float32("lattice_samples", origins=origins, dirs=dirs)
     if occupancy.dtype != torch.bool:
         raise ValueError(f"fused lattice_samples: bool occupancy expected, got {occupancy.dtype}")
-    return tuple(_extension()[0].lattice_bounded(origins.contiguous(), dirs.contiguous(),
-                                                 occupancy.contiguous(), float(s), float(near),
-                                                 float(extent)))
+    return tuple(extension().lattice_bounded(origins.contiguous(), dirs.contiguous(),
+                                             occupancy.contiguous(), float(s), float(near),
+                                             float(extent)))

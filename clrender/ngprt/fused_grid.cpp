@@ -244,7 +244,8 @@ constexpr int64_t AUX_BLOCK = 64;
 // so relu keeps it 0 and masks its gradient), in vectors of V floats, the target's widest
 // (GCC vector types: wider ones are split into the target's with values passed through
 // the stack, and compared a float at a time). A float's operations and their order do not
-// depend on V, so neither do the results.
+// depend on V, so neither do the results (where the target has FMA: one without rounds each
+// product, e.g. x86-64 without AVX).
 constexpr int64_t PI = 32, PH = 64, PO = 16;
 #if defined(__AVX512F__)
 constexpr int64_t V = 16;
@@ -691,6 +692,7 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("grid_forward", &grid_forward, "fused multi-level grid lookup");
     m.def("grid_backward", &grid_backward, "its table gradient");
     m.attr("AUX_MAX") = pybind11::make_tuple(PI, PH, PO);   // the MLP's largest sizes
+    m.attr("AUX_VECTOR") = V;                                // floats a vector of the MLP
     m.def("aux_forward", &aux_forward, "the auxiliary NGP: encoding + MLP");
     m.def("aux_backward", &aux_backward, "its gradients");
     m.def("coarse_corners", &coarse_corners, "the L_C cells' corners, de-duplicated");
