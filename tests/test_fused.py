@@ -189,7 +189,7 @@ def test_the_mlp_in_4_float_vectors_equals_torch():
     and gradients within the tolerance above, as this machine's wider build."""
     if fused.extension().AUX_VECTOR == 4:
         pytest.skip("this machine's build is the 4-float one already (no AVX)")
-    narrow = fused.extension([*fused.CFLAGS, "-mno-avx"])
+    narrow = fused.extension([*fused.CFLAGS, "-mno-avx"])    # .ci/install builds it ahead
     assert narrow.AUX_VECTOR == 4
     tables, u, res, dense, on_vertices, w0, b0, w1, b1 = case = _aux_case(out=9)
     ref_out, ref_grads = _aux_run(ops.aux_values, case, 2)
