@@ -127,19 +127,26 @@ async function main() {
     return performance.now() - t0;
   }
 
-  let dirty = true;
+  // Draws the view at the chosen resolution and shows the mean time of the last 30 frames;
+  // the first call also marks the load's end.
+  function redraw() {
+    const cam = view.camera(parseFloat($("scale").value));
+    times.push(draw(cam));
+    if (hook.loadMs === undefined) hook.loadMs = performance.now();   // since navigation
+    if (times.length > 30) times.shift();
+    const ms = times.reduce((a, b) => a + b, 0) / times.length;
+    $("stats").textContent = `${cam.width}x${cam.height}: ${ms.toFixed(1)} ms a frame ` +
+      `(${(1000 / ms).toFixed(1)} fps), load ${(hook.loadMs / 1000).toFixed(2)} s, ` +
+      `${(model.bytes / 1e6).toFixed(1)} MB`;
+    const size = Math.min(window.innerWidth - 260, window.innerHeight * view.base.width / view.base.height);
+    canvas.style.width = `${Math.min(size, view.base.width * 2)}px`;
+  }
+
+  let dirty = false;
   function frame() {
     if (dirty || $("continuous").checked) {
       dirty = false;
-      const cam = view.camera(parseFloat($("scale").value));
-      times.push(draw(cam));
-      if (times.length > 30) times.shift();
-      const ms = times.reduce((a, b) => a + b, 0) / times.length;
-      $("stats").textContent = `${cam.width}x${cam.height}: ${ms.toFixed(1)} ms a frame ` +
-        `(${(1000 / ms).toFixed(1)} fps), load ${(hook.loadMs / 1000).toFixed(2)} s, ` +
-        `${(model.bytes / 1e6).toFixed(1)} MB`;
-      const size = Math.min(window.innerWidth - 260, window.innerHeight * view.base.width / view.base.height);
-      canvas.style.width = `${Math.min(size, view.base.width * 2)}px`;
+      redraw();
     }
     requestAnimationFrame(frame);
   }
@@ -177,8 +184,7 @@ async function main() {
     },
     setBackground: (rgb) => { renderer.background = rgb; },
   });
-  draw(view.camera(parseFloat($("scale").value)));
-  hook.loadMs = performance.now();    // since navigation started
+  redraw();                           // the first frame, drawn once
   hook.ready = true;
   requestAnimationFrame(frame);
 }
