@@ -28,12 +28,15 @@ def browser():
 
 
 def page_frames(browser, folder, cameras) -> list[np.ndarray]:
-    """The page of ``folder`` drawing each camera: float frames (H, W, 3)."""
+    """The page of ``folder`` drawing each camera: float frames (H, W, 3). The page's own
+    first frame, of its first camera, is drawn at a quarter of that camera's size
+    (``?scale=0.25``): on a software GL it costs seconds, and the cameras drawn here are
+    the test's."""
     from clrender.export.page import open_page, render_view
 
     url, server = serve(folder)
     try:
-        open_page(browser, url)
+        open_page(browser, url + "?scale=0.25")
         return [render_view(browser, cam)[0] for cam in cameras]
     finally:
         server.shutdown()
