@@ -96,6 +96,11 @@ def _aux_case(seed=0, n=3000, hidden=64, out=12):
     return tables, u, res, dense, on_vertices, w0, b0, w1, b1
 
 
+def _upstream(shape) -> torch.Tensor:
+    """The gradient arriving at the auxiliary values in these tests (seeded)."""
+    return torch.randn(shape, generator=torch.Generator().manual_seed(2))
+
+
 def _aux_run(fn, case, threads):
     tables, u, res, dense, on_vertices, *weights = case
     params = [t.clone().requires_grad_() for t in [tables, *weights]]
@@ -103,8 +108,7 @@ def _aux_run(fn, case, threads):
     torch.set_num_threads(threads)
     try:
         out = fn(params[0], u, res, dense, on_vertices, *params[1:])
-        g = torch.randn(out.shape, generator=torch.Generator().manual_seed(2))
-        return out.detach(), torch.autograd.grad(out, params, g)
+        return out.detach(), torch.autograd.grad(out, params, _upstream(out.shape))
     finally:
         torch.set_num_threads(prev)
 
@@ -193,7 +197,7 @@ def test_the_mlp_in_4_float_vectors_equals_torch():
     assert narrow.AUX_VECTOR == 4
     tables, u, res, dense, on_vertices, w0, b0, w1, b1 = case = _aux_case(out=9)
     ref_out, ref_grads = _aux_run(ops.aux_values, case, 2)
-    g = torch.randn(ref_out.shape, generator=torch.Generator().manual_seed(2))   # _aux_run's
+    g = _upstream(ref_out.shape)
     out, x = narrow.aux_forward(tables, u, res, dense, on_vertices, w0, b0, w1, b1, True)
     got = [out, *narrow.aux_backward(g, x, tables, u, res, dense, on_vertices, w0, b0, w1, b1)]
     for name, a, b in zip(("out", "tables", "w0", "b0", "w1", "b1"), got,
