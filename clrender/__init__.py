@@ -8,13 +8,20 @@ Examples:
     >>> renderer = clrender.Renderer(model)                  # upload once, render many views
     >>> out = renderer.render(cam, stats=True)               # rgb, ms per stage, statistics
 
-Rendering needs numpy and pyopencl (and embreex for NDRF); training and baking use PyTorch.
+Loading and rendering a baked file of either method need the core install alone (numpy,
+scipy, pyopencl); training, baking, capture, the viewer and the benchmarks are extras
+(:mod:`clrender.extras`).
 """
+from importlib import metadata as _metadata
+
 from .camera import Camera, generate_rays, look_at
 from .methods import load
 from .paths import orbit_path, spiral_path
 from .renderer import Renderer, render
 
-__version__ = "0.1.0"
+try:
+    __version__ = _metadata.version("clrender")      # one source: pyproject.toml
+except _metadata.PackageNotFoundError:                # a source tree that is not installed
+    __version__ = "0+unknown"
 __all__ = ["Camera", "generate_rays", "look_at", "orbit_path", "spiral_path", "load", "render",
            "Renderer", "__version__"]

@@ -1,5 +1,8 @@
-"""The ``clrender`` command line: info | scene | data | train | bake | render | eval, plus
-each method's own commands (``clrender ndrf extract``)."""
+"""The ``clrender`` command line: info | scene | data | capture | train | bake | render |
+eval | view | export, plus each method's own commands (``clrender ndrf extract | init``).
+
+Errors a user can cause (a bad file or folder, a missing or wrong device, a missing extra,
+a port in use) print one line on stderr and exit with status 2."""
 from __future__ import annotations
 
 import argparse
@@ -7,8 +10,11 @@ import json
 import os
 import sys
 
-from . import cliopts, methods
+from . import __version__, cliopts, methods
 from .contract import check_options
+from .device import DeviceError
+from .export.serve import DEFAULT_PORT
+from .extras import missing, require
 from .paths import PATHS
 
 
@@ -23,7 +29,7 @@ def _cmd_info(args) -> int:
     try:
         chosen = device.select_device(args.device)
     except device.DeviceError as exc:
-        print(exc, file=sys.stderr)
+        _error("info", exc)
     for i, d in enumerate(devices):
         info = device.device_info(d)
         mark = "*" if chosen is not None and d == chosen else " "
@@ -40,6 +46,7 @@ def _cmd_info(args) -> int:
 
 
 def _cmd_scene(args) -> int:
+    require("train", "`clrender scene make`", modules=("trimesh", "embreex"))
     from .data.scene import make_scene
 
     out = make_scene(args.kind, args.out, seed=args.seed, n_train=args.train, n_test=args.test,
@@ -56,12 +63,16 @@ def _cmd_data_check(args) -> int:
 
 
 def _cmd_capture(args) -> int:
+    require("capture", "`clrender capture`")
     from .capture import capture
     from .capture.output import format_report
 
     report = capture(args.src, args.out, max_frames=args.frames, matcher=args.matcher,
                      bounded=args.bounded, downscale=args.downscale, force=args.force,
                      threads=args.threads, mapper=args.mapper, focal=args.focal)
+    if report.get("reused"):
+        print(f"{args.out}: a finished capture with these options, kept as it is "
+              "(--force redoes it)")
     print(format_report(report))
     print(f"wrote {args.out} (train with: clrender train {args.out} --out RUN"
           f"{f' --downscale {args.downscale}' if args.downscale else ''})")
@@ -94,6 +105,7 @@ def _model_downscale(args) -> int:
 
 
 def _cmd_train(args) -> int:
+    require("train", "`clrender train`")
     spec = methods.get(args.method)
     preset = args.preset or spec.default_preset
     if preset not in spec.presets:
@@ -108,6 +120,7 @@ def _cmd_train(args) -> int:
 
 
 def _cmd_bake(args) -> int:
+    require("train", "`clrender bake`", modules=("torch",))
     spec = methods.of_run(args.run)
     path = spec.bake_run(args.run, args.out,
                          **cliopts.chosen(args, "bake", methods.name_of(spec)))
@@ -126,6 +139,8 @@ def _render_options(args) -> dict:
 def _cmd_render(args) -> int:
     from .video import render_path
 
+    if str(args.out).lower().endswith(".mp4"):
+        require("video", "an .mp4 from `clrender render` (or: --out a .gif or a folder)")
     downscale = _model_downscale(args) if args.data else 1
     render_path(args.model, args.out, path=args.path, frames=args.frames, width=args.width,
                 height=args.height, data=args.data, downscale=downscale, device=args.device,
@@ -134,6 +149,7 @@ def _cmd_render(args) -> int:
 
 
 def _cmd_eval(args) -> int:
+    require("eval", "`clrender eval`")
     from .evaluate import evaluate
 
     result = evaluate(args.model, args.data, device=args.device, split=args.split,
@@ -144,9 +160,7 @@ def _cmd_eval(args) -> int:
 
 
 def _cmd_view(args) -> int:
-    from .extras import require
-
-    require("viser", "view", "`clrender view`")
+    require("view", "`clrender view`")
     from .viewer import serve
 
     serve(args.model, data=args.data, host=args.host, port=args.port, device=args.device,
@@ -165,7 +179,8 @@ def _cmd_export(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="clrender", description=__doc__)
+    p = argparse.ArgumentParser(prog="clrender", description=__doc__.split("\n\n")[0])
+    p.add_argument("--version", action="version", version=f"clrender {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("info", help="list OpenCL platforms and devices")
@@ -268,7 +283,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("model")
     s.add_argument("--data", default=None, help="dataset whose training cameras are drawn")
     s.add_argument("--host", default="127.0.0.1", help="address to listen on (default local only)")
-    s.add_argument("--port", type=int, default=8080, help="port (the next free one if taken)")
+    s.add_argument("--port", type=int, default=DEFAULT_PORT,
+                   help=f"port (default {DEFAULT_PORT}; the next free one if taken)")
     s.add_argument("--max-size", type=int, default=800, help="long side of a resting frame, px")
     s.add_argument("--device", default=None)
     s.set_defaults(func=_cmd_view)
@@ -280,7 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_downscale(s, None, "of --data; default: the model's training downscale")
     s.add_argument("--serve", action="store_true", help="then serve it over HTTP")
     s.add_argument("--host", default="127.0.0.1", help="address to serve on (default local only)")
-    s.add_argument("--port", type=int, default=8000, help="port to serve on (0: a free one)")
+    s.add_argument("--port", type=int, default=DEFAULT_PORT,
+                   help=f"port to serve on (default {DEFAULT_PORT}; 0: a free one)")
     s.set_defaults(func=_cmd_export)
 
     for name in methods.names():
@@ -298,9 +315,20 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError, methods.PluginError) as exc:
-        print(f"clrender {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+    except ModuleNotFoundError as exc:               # an extra's package, else a broken install
+        extra = missing(exc, f"`clrender {args.command}`")
+        if extra is None:
+            raise
+        return _error(args.command, extra)
+    except (ValueError, OSError, DeviceError, methods.PluginError) as exc:
+        return _error(args.command, exc)
+
+
+def _error(command: str, exc: Exception) -> int:
+    """One line on stderr naming the problem; the exit status 2."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    print(f"clrender {command}: error: {text}", file=sys.stderr)
+    return 2
 
 
 if __name__ == "__main__":

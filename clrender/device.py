@@ -140,13 +140,12 @@ def device_type_name(device: cl.Device) -> str:
 
 
 def _describe(devices: list[cl.Device]) -> str:
+    """The devices on one line (an error's tail), by index."""
     if not devices:
-        return "  (no OpenCL platform found: install Debian's pocl-opencl-icd, pip's intel-opencl-rt or a vendor driver)"
-    lines = []
-    for i, d in enumerate(devices):
-        lines.append(f"  [{i}] {d.platform.name.strip()} / {d.name.strip()} "
-                     f"({device_type_name(d)})")
-    return "\n".join(lines)
+        return ("no OpenCL platform found: install Debian's pocl-opencl-icd, pip's "
+                "intel-opencl-rt or a vendor driver")
+    return "; ".join(f"[{i}] {d.platform.name.strip()} / {d.name.strip()} "
+                     f"({device_type_name(d)})" for i, d in enumerate(devices))
 
 
 def _kind(device: cl.Device) -> tuple[int, str]:
@@ -209,7 +208,7 @@ def select_device(spec: str | None = None) -> cl.Device:
     spec = spec.strip()
     devices = list_devices()
     if not devices:
-        raise DeviceError("no OpenCL device found:\n" + _describe(devices))
+        raise DeviceError("no OpenCL device found: " + _describe(devices))
     types = {"gpu": cl.device_type.GPU, "cpu": cl.device_type.CPU,
              "accelerator": cl.device_type.ACCELERATOR}
     if not spec:
@@ -227,7 +226,7 @@ def select_device(spec: str | None = None) -> cl.Device:
     else:
         match = _matching(key, devices)
     if not match:
-        raise DeviceError(f"no OpenCL device matches {spec!r}; devices that exist:\n"
+        raise DeviceError(f"no OpenCL device matches {spec!r}; devices that exist: "
                           + _describe(devices))
     return match[0]
 

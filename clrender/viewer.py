@@ -30,11 +30,11 @@ import viser.transforms as vtf
 
 from . import methods
 from .camera import Camera
+from .export.serve import DEFAULT_PORT   # viser moves on to the next free port when taken
 from .paths import ORBIT
 from .renderer import Renderer
 from .video import to_uint8
 
-DEFAULT_PORT = 8080          # viser moves on to the next free port when it is taken
 CV_FROM_GL = np.diag([1.0, -1.0, -1.0])  # camera axes: NeRF/Blender <-> OpenCV (its own inverse)
 THUMBNAIL = 64               # long side of a training frustum's image, pixels
 

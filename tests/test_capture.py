@@ -167,13 +167,32 @@ def test_capture_is_a_dataset_the_loader_reads_bounded(captured):
 def test_capture_resumes_from_its_work_folder(captured, photos):
     out, first = captured
     again = capture(photos[0], out, bounded=True, downscale=2)   # finished: the report
-    assert again == first
+    assert again == {**first, "reused": True}
     shutil.rmtree(out)
     redone = capture(photos[0], out, bounded=True, downscale=2)
     assert all(redone["stages"][s]["skipped"] for s in
                ("frames", "features", "matching", "mapping", "undistortion"))
     assert not redone["stages"]["output"]["skipped"]
     assert redone["registered"] == VIEWS and (out / "images_2").is_dir()
+
+
+def test_a_finished_capture_asked_again_redoes_what_the_new_options_change(captured, photos,
+                                                                          tmp_path):
+    out, first = captured
+    for folder in (out, out.with_name(out.name + ".work")):
+        shutil.copytree(folder, tmp_path / folder.name)
+    copy = tmp_path / out.name
+    report = capture(photos[0], copy, bounded=True, downscale=3)     # only the output
+    assert "reused" not in report and report["downscale"] == 3
+    assert all(report["stages"][s]["skipped"] for s in
+               ("frames", "features", "matching", "mapping", "undistortion"))
+    assert not report["stages"]["output"]["skipped"]
+    assert (copy / "images_3").is_dir() and not (copy / "images_2").exists()
+    report = capture(photos[0], copy, bounded=True, downscale=3, mapper="incremental")
+    assert all(report["stages"][s]["skipped"] for s in ("frames", "features", "matching"))
+    assert not report["stages"]["mapping"]["skipped"] and report["mapper"] == "incremental"
+    assert capture(photos[0], copy, bounded=True, downscale=3,
+                   mapper="incremental")["reused"] is True
 
 
 def test_incremental_mapping_recovers_the_poses_and_reuses_the_matches(captured, photos,
@@ -381,6 +400,7 @@ def test_cli_prints_the_report_and_names_bad_input(captured, photos, tmp_path, c
                  "--downscale", "2"]) == 0
     printed = capsys.readouterr().out
     assert f"registered {VIEWS} of {VIEWS} images" in printed and "camera SIMPLE_RADIAL" in printed
+    assert f"{out}: a finished capture with these options, kept as it is" in printed
     assert main(["capture", str(tmp_path / "nowhere"), "--out", str(tmp_path / "d")]) == 2
     assert "nowhere: no such folder or video" in capsys.readouterr().err
     with pytest.raises(SystemExit):

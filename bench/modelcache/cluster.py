@@ -98,7 +98,7 @@ class Session:
     def __enter__(self) -> "Session":
         from clrender.extras import require
 
-        require("ray", "cluster", "--executor ray")
+        require("cluster", "--executor ray", modules=("ray",))
         import ray
 
         os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")

@@ -49,7 +49,11 @@ def capture(src, out, max_frames: int = 200, matcher: str = "auto", bounded=None
 
     Args:
         src: a folder of photos (``.png``, ``.jpg``) or a video file.
-        out: the dataset folder to write (must not exist unless ``force``).
+        out: the dataset folder to write: a new or empty one, a finished capture (asked
+            again with other options, redone from the first stage they change: a new
+            ``downscale`` or ``bounded`` only the output, a new ``mapper`` or ``focal``
+            from the mapping; with the same options kept, the report's ``reused`` True),
+            or any folder with ``force``.
         max_frames: a video's frame budget (the sharpest of each window).
         matcher: "auto" (sequential for video or over EXHAUSTIVE_MAX photos), "exhaustive"
             or "sequential".
@@ -73,11 +77,10 @@ def capture(src, out, max_frames: int = 200, matcher: str = "auto", bounded=None
         raise ValueError(f"focal length {focal!r}: expected a number of pixels > 0")
     if not src.exists():
         raise FileNotFoundError(f"{src}: no such folder or video")
+    finished = not force and (out / REPORT).is_file()
     if force:
         shutil.rmtree(work, ignore_errors=True)
-    elif (out / REPORT).is_file():
-        return json.loads((out / REPORT).read_text())
-    elif out.exists() and any(out.iterdir()):
+    elif out.exists() and any(out.iterdir()) and not finished:
         raise ValueError(f"{out}: exists and is not a finished capture (use --force to "
                          "replace it)")
     is_video = src.is_file()
@@ -120,8 +123,20 @@ def capture(src, out, max_frames: int = 200, matcher: str = "auto", bounded=None
               "camera": mapped.get("camera"),
               "scene": "bounded" if is_bounded else "unbounded",
               "matcher": run.info("matching")["matcher"], "downscale": downscale}
-    run.stage("output", lambda: write_output(work, out, report, run.times, force))
+    if finished:
+        old = json.loads((out / REPORT).read_text())
+        if _same_result(old, report):
+            return {**old, "reused": True}
+    run.stage("output", lambda: write_output(work, out, report, run.times, force or finished))
     return json.loads((out / REPORT).read_text())
+
+
+def _same_result(old: dict, new: dict) -> bool:
+    """Whether a finished capture's report ``old`` holds what ``new`` (a report before its
+    output stage) asks for: the same fields but the stages' times and the threads."""
+    ignored = {"stages", "total_seconds", "threads"}
+    return ({k: v for k, v in old.items() if k not in ignored}
+            == json.loads(json.dumps({k: v for k, v in new.items() if k not in ignored})))
 
 
 def choose_mapper(mapper: str, silhouettes: bool) -> str:
@@ -174,7 +189,7 @@ def check_settings(work: Path, settings: dict) -> None:
         if old != settings:
             changed = ", ".join(f"{k} {old.get(k)!r} -> {v!r}" for k, v in settings.items()
                                 if old.get(k) != v)
-            raise ValueError(f"{work}: a capture with other settings is under way here "
+            raise ValueError(f"{work}: a capture with other settings was made here "
                              f"({changed}); use --force to start over")
     else:
         write_atomic(file, json.dumps(settings, indent=2))

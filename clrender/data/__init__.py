@@ -11,8 +11,15 @@ from .blender import load_blender
 from .dataset import Dataset
 from .load import detect_format, load_dataset, scan_dataset
 from .llff import load_llff
-from .scene import make_scene
 from .views import SplitViews, read_views
 
 __all__ = ["Dataset", "SplitViews", "detect_format", "load_dataset", "load_blender",
            "load_llff", "make_scene", "read_views", "scan_dataset"]
+
+
+def make_scene(*args, **kwargs):
+    """:func:`clrender.data.scene.make_scene` (imported when called: ray casting the
+    built-in scenes needs the ``train`` extra's trimesh and embreex)."""
+    from .scene import make_scene as make
+
+    return make(*args, **kwargs)

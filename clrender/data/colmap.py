@@ -52,11 +52,11 @@ def find_model(root: Path) -> Path | None:
 def read_model(folder: Path):
     """(cameras {id: Camera}, images [(name, camera_id, (4, 4) cam_from_world)]) of a COLMAP
     model folder, sorted by name; errors name the folder."""
-    try:
-        import pycolmap
-    except ImportError as exc:
-        raise ValueError(f"{folder}: reading a COLMAP model needs pycolmap "
-                         "(pip install pycolmap)") from exc
+    from ..extras import require
+
+    require("capture", f"{folder}: reading a COLMAP model", modules=("pycolmap",))
+    import pycolmap
+
     missing = [n for n in MODEL_FILES
                if not any((folder / f"{n}{ext}").is_file() for ext in (".bin", ".txt"))]
     if missing:

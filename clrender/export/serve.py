@@ -2,10 +2,15 @@
 fetch its binary assets)."""
 from __future__ import annotations
 
+import errno
 import functools
 import threading
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
+
+
+# The port of clrender's local servers (`clrender view`, `clrender export --serve`).
+DEFAULT_PORT = 8080
 
 
 class _Quiet(SimpleHTTPRequestHandler):
@@ -20,7 +25,13 @@ def serve(folder, host: str = "127.0.0.1", port: int = 0, block: bool = False):
     if not (folder / "index.html").is_file():
         raise FileNotFoundError(f"{folder}: no index.html (not an exported page)")
     handler = functools.partial(_Quiet, directory=str(folder))
-    server = ThreadingHTTPServer((host, port), handler)
+    try:
+        server = ThreadingHTTPServer((host, port), handler)
+    except OSError as exc:
+        if exc.errno != errno.EADDRINUSE:
+            raise
+        raise ValueError(f"port {port} on {host} is in use: choose another (--port N, or "
+                         "--port 0 for a free one)") from None
     url = f"http://{host}:{server.server_address[1]}/"
     if block:
         print(f"serving {folder} at {url} (Ctrl-C stops)")

@@ -95,6 +95,9 @@ PAPER_SMOKE = PaperSmoke(
 
 
 def _cmd_extract(args) -> int:
+    from ..extras import require
+
+    require("train", "`clrender ndrf extract`")
     from ..methods import load
     from .mesh import extract_duplex, extract_preset, write_meshes
 
@@ -118,6 +121,9 @@ def _cmd_extract(args) -> int:
 
 
 def _cmd_init(args) -> int:
+    from ..extras import require
+
+    require("train", "`clrender ndrf init`", modules=("trimesh",))
     from .init import init_model_from_meshes
 
     path = init_model_from_meshes(args.meshes, args.out, seed=args.seed)

@@ -38,6 +38,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from ..device import select_device
 from ..runs import RunFolder, finite_step, mse_psnr, pick_device, set_lr
 from .baked import NDRFModel, save_baked, validate
 from .config import NDRFConfig, preset as ndrf_preset
@@ -237,6 +238,8 @@ def train(data, out, teacher, preset: str = "cpu", iterations: int | None = None
     ds = _bounded_train_set(data, downscale)
     data_path = None if hasattr(data, "images") else str(Path(data).resolve())
     cfg, tcfg, ecfg = configs(preset, iterations, train_config, **options)
+    if tcfg.distill:
+        select_device()       # the teacher renders on it: checked before the run folder is made
     teacher_model, teacher_id = _teacher_info(teacher)
     run = RunFolder(out, _config_json(ds, data_path, cfg, tcfg, ecfg, teacher_id, preset, seed,
                                        downscale))

@@ -16,6 +16,8 @@ from .encoding import SH_C
 
 VARIANTS = ("sum", "mlp", "shared-inv", "separate-inv", "shared-v", "separate-v")
 SCENES = ("bounded", "unbounded")
+# Training engines (clrender.ngprt.engine): the torch autograd specification, the fused C++ twin.
+ENGINES = ("torch", "fast")
 N_MIP = 5                 # occupancy mip levels R, R/2, ..., R/16, R = occ_res (S2.5)
 T_STOP = 2e-3             # early ray termination threshold on transmittance (S2.5)
 FEATURES = 8              # deferred feature: density 1, diffuse rgb 3, specular 4

@@ -20,8 +20,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from . import torch_ops as ops
-
-ENGINES = ("torch", "fast")
+from .config import ENGINES
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,7 @@ from pathlib import Path
 
 from ..contract import BenchSpec, MethodSpec, Option, PaperSmoke, Stat, preset_steps
 from .baked import FORMAT, G_METRICS, load_baked
-from .config import GRIDS, PRESETS as _MODEL_PRESETS, VARIANTS
-from .engine import ENGINES
+from .config import ENGINES, GRIDS, PRESETS as _MODEL_PRESETS, VARIANTS
 from .marches import MARCHES
 from .render_cl import Renderer as _CLRenderer
 
