@@ -169,12 +169,35 @@ def _cmd_view(args) -> int:
 
 
 def _cmd_export(args) -> int:
+    if args.format == "glb":
+        return _export_glb(args)
+    glb_only = [f for f, v in (("--colours", args.colours), ("--threshold", args.threshold),
+                               ("--extraction", args.extraction), ("--cameras", args.cameras))
+                if v not in (None, False)]
+    if glb_only:
+        raise ValueError(f"{', '.join(glb_only)}: options of --format glb")
     from .export import export, serve
 
     out = export(args.model, args.out, data=args.data, downscale=args.downscale)
     print(f"wrote {out} (serve it: python -m http.server -d {out}, or --serve)")
     if args.serve:
         serve(out, host=args.host, port=args.port, block=True)
+    return 0
+
+
+def _export_glb(args) -> int:
+    require("train", "`clrender export --format glb`",
+            modules=("trimesh", "skimage", "fast_simplification", "embreex"))
+    from .export.gltf import export_glb
+
+    if args.serve:
+        raise ValueError("--serve: a page's option (--format page)")
+    if not str(args.out).lower().endswith(".glb"):
+        raise ValueError(f"--out {args.out}: a .glb file is expected with --format glb")
+    out = export_glb(args.model, args.out, data=args.data, downscale=args.downscale,
+                     colours=args.colours or "renders", threshold=args.threshold,
+                     extraction=args.extraction or "cpu", cameras=args.cameras)
+    print(f"wrote {out} ({out.stat().st_size / 2**20:.1f} MiB)")
     return 0
 
 
@@ -289,11 +312,25 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--device", default=None)
     s.set_defaults(func=_cmd_view)
 
-    s = sub.add_parser("export", help="a static WebGL2 page of a baked model (docs/browser.md)")
+    s = sub.add_parser("export", help="a static WebGL2 page of a baked model, or its coloured "
+                                      "mesh as glTF (--format glb)")
     s.add_argument("model")
-    s.add_argument("--out", required=True, help="a new folder for the page")
-    s.add_argument("--data", default=None, help="dataset whose test cameras the page lists")
+    s.add_argument("--format", default="page", choices=["page", "glb"],
+                   help="page: a WebGL2 page (default); glb: coloured meshes, glTF 2.0 binary")
+    s.add_argument("--out", required=True, help="a new folder for the page, or a .glb file")
+    s.add_argument("--data", default=None, help="dataset whose test cameras the page lists "
+                                                "(glb: whose training views colour the mesh)")
     _add_downscale(s, None, "of --data; default: the model's training downscale")
+    s.add_argument("--colours", default=None, choices=["renders", "images"],
+                   help="glb: fit the vertex colours to the model's renders (default) or to "
+                        "the training images of --data")
+    s.add_argument("--threshold", type=float, default=None, metavar="ALPHA",
+                   help="glb of an NGP-RT model: the surface's alpha level (default 0.01)")
+    s.add_argument("--extraction", default=None, choices=["tiny", "cpu", "paper"],
+                   help="glb of an NGP-RT model: the extraction's size (density grid 64, 256, "
+                        "512 a side; default cpu)")
+    s.add_argument("--cameras", action="store_true",
+                   help="glb: also write the test cameras of --data as glTF cameras")
     s.add_argument("--serve", action="store_true", help="then serve it over HTTP")
     s.add_argument("--host", default="127.0.0.1", help="address to serve on (default local only)")
     s.add_argument("--port", type=int, default=DEFAULT_PORT,

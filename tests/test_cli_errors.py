@@ -87,6 +87,7 @@ def test_the_device_variable_is_named_as_the_flag_is(models, tmp_path, capsys, m
     (["view", "MODEL"], "view", "viser", "view"),
     (["render", "MODEL", "--out", "orbit.mp4"], "render", "imageio_ffmpeg", "video"),
     (["ndrf", "extract", "TEACHER", "--out", "OUT"], "ndrf", "skimage", "train"),
+    (["export", "MODEL", "--format", "glb", "--out", "m.glb"], "export", "trimesh", "train"),
 ])
 def test_a_missing_extra_is_named_in_one_line(argv, command, module, extra, monkeypatch,
                                               capsys):

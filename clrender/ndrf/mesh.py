@@ -73,11 +73,13 @@ def extract_preset(name: str, **overrides) -> ExtractConfig:
     return replace(PRESETS[name], **overrides)
 
 
-def teacher_density(model) -> DensityFn:
+def teacher_density(model, inner_box: bool = False) -> DensityFn:
     """The density field a baked NGP-RT teacher renders (bounded scenes).
 
     Args:
-        model: a :class:`clrender.ngprt.baked.BakedModel` with ``scene == "bounded"``.
+        model: a :class:`clrender.ngprt.baked.BakedModel` with ``scene == "bounded"``, or
+            with ``inner_box`` an unbounded one too: its density inside the inner unit box
+            [-1, 1]^3, where the contraction is the identity.
     Returns:
         ``density(xyz)``: world points (M, 3) float32 -> sigma (M,) float32 in 1 / world
         units: ``exp`` of the feature's sigma logit (numpy reference ``features``) where the
@@ -85,13 +87,14 @@ def teacher_density(model) -> DensityFn:
         teacher renders nothing.
     """
     cfg = model.config
-    if cfg.scene != "bounded":
+    unbounded = cfg.scene != "bounded"
+    if unbounded and not inner_box:
         raise ValueError(f"teacher scene is {cfg.scene!r}: NDRF covers bounded scenes only; "
                          "mesh extraction in contracted space is not supported")
     occupancy = model.arrays["occupancy_0"]
 
     def density(xyz: np.ndarray) -> np.ndarray:
-        u = to_grid(np.asarray(xyz, F32).reshape(-1, 3), cfg.extent, False)
+        u = to_grid(np.asarray(xyz, F32).reshape(-1, 3), cfg.extent, unbounded)
         inside = np.all((u >= 0) & (u <= 1), axis=1)
         i = cell_index(u, cfg.L_C)
         live = np.flatnonzero(inside & (occupancy[i[:, 0], i[:, 1], i[:, 2]] != 0))
