@@ -27,7 +27,8 @@ from tqdm import tqdm
 from bench import options, train_curve
 from bench.modelcache import cache, cluster
 from bench.modelcache.fingerprint import code_fingerprint
-from bench.tables import ablation, report, seeds
+from bench.tables import ablation, command, report, seeds
+from bench.tools import public_scenes
 from clrender import methods
 
 
@@ -69,7 +70,7 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict,
     cam = test_set.cameras[0]
     meta = {**meta, "resolution": f"{cam.width}x{cam.height}",
             "code": {m: code_fingerprint(m) for m in sorted({r.method for r in table.rows})},
-            "cache": {"root": str(args.cache), "models": used},
+            "cache": {"root": options.shown_path(args.cache), "models": used},
             "wall_s": round(time.monotonic() - started, 1)}
     return report.write_table(args.out, table, results, meta)
 
@@ -135,6 +136,11 @@ def bake_options(given: list[str]) -> dict:
     return out
 
 
+def _one_table(argv: list[str], key: str) -> list[str]:
+    """The arguments that run the table ``key`` alone: ``all`` replaced by its name."""
+    return [key if a == "all" else a for a in argv]
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == [train_curve.KEY]:
@@ -160,13 +166,15 @@ def main(argv=None) -> int:
         meta = options.run_meta(args.device)
         with (cluster.Session(args.address, args.torch_device) if args.executor == "ray"
               else contextlib.nullcontext()) as session:
-            for table in tables:
+            for key, table in zip(keys, tables):
                 started = time.monotonic()     # the table's wall time includes its scene
                 scene = args.scene or table.scene
                 data = cache.resolve_scene(scene, args.cache)
                 fingerprint = cache.data_fingerprint(data, args.downscale)
-                meta.update(preset=args.preset or table.preset, scene=scene
-                            if args.downscale == 1 else f"{scene} (downscale {args.downscale})")
+                meta.update(argv=command.recorded(_one_table(argv, key)),
+                            preset=args.preset or table.preset,
+                            scene=options.shown_scene(scene, args.downscale),
+                            public_scene=public_scenes.identify(data))
                 print(run_table(table, data, fingerprint, args, meta, session, started))
         report.write_index(args.out)
         print(f"results written to {args.out}/")

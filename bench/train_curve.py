@@ -428,8 +428,7 @@ def run(args, meta: dict) -> str:
     fingerprint = cache.data_fingerprint(data, args.downscale)
     curves = curve_options(args.method, args.option)
     name = row.name if curves == [None] else f"{row.name} with the legend's options"
-    meta = {**meta, "scene": scene if args.downscale == 1
-            else f"{scene} (downscale {args.downscale})", "method": args.method,
+    meta = {**meta, "scene": options.shown_scene(scene, args.downscale), "method": args.method,
             "row": name if args.test_stride == 1
             else f"{name}, every {args.test_stride}th test view", "x_axis": args.x_axis}
     points, text = [], ""

@@ -12,11 +12,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from bench.tables import ablation, compare
+from bench.tables import ablation, command, compare, markdown
 from clrender.atomic import write_atomic
 
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
-KEYS = ["title", "rows", "comparisons", "preset", "scene", "device", "date", "git_revision"]
+KEYS = ["title", "rows", "comparisons", "preset", "scene", "device", "date", "git_revision",
+        "argv"]
 
 
 def _ours(rec: dict) -> str:
@@ -27,12 +28,15 @@ def _ours(rec: dict) -> str:
 
 
 def run_line(data: dict, dated: bool = True) -> str:
-    """Where and how a table was run: seeds, preset, scene, device and (``dated``) its date
-    and git revision."""
+    """Where and how a table was run: seeds, preset, scene, device, (``dated``) its date and
+    git revision (marked where made from uncommitted changes), then its ``bench.run``
+    command."""
     n = len(data["rows"][0].get("seeds") or [None])
     line = (f"{n} seed{'s' if n > 1 else ''}, `{data['preset']}` preset, {data['scene']} "
             f"scene, {data['device']}")
-    return line + (f", {data['date']}, git {data['git_revision']}." if dated else ".")
+    line += (f", {data['date']}, {markdown.revision(data)}." if dated
+             else " (**uncommitted changes**)." if command.is_dirty(data) else ".")
+    return line + f" `{command.lines(data)[-1]}`"
 
 
 def _speedup(data: dict, rec: dict) -> str:
@@ -50,7 +54,7 @@ def _speedup(data: dict, rec: dict) -> str:
 def table_summary(data: dict, dated: bool = True) -> list[str]:
     """Markdown lines of one table's summary from its JSON ``data`` (a column of counts
     where a claim has some); ``dated``: :func:`run_line`'s date and revision."""
-    lines = [f"### {data['title']}", "", run_line(data, dated), ""]
+    lines = [f"### {markdown.title(data)}", "", run_line(data, dated), ""]
     if not data["comparisons"]:
         return lines + ["No comparisons.", ""]
     counts = any(r.get("counts") for r in data["comparisons"])
