@@ -78,7 +78,9 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict,
 def _pair_rows(table, measured: dict, entries: dict, test_set, seed_list, args) -> None:
     """Each row with a baseline timed against it as interleaved pairs, per seed (the
     baseline's model of the same seed; :func:`bench.tables.measure.measure_pair`), into
-    ``measured[row, seed]``'s ``paired_speedup``, ``paired_at`` and ``same_image``."""
+    ``measured[row, seed]``'s ``paired_speedup``, ``paired_at`` and ``same_image``; and
+    each comparison of a row against another than its baseline, at the test size, into
+    its ``paired_with``."""
     from dataclasses import replace
 
     from bench.tables.measure import measure_pair
@@ -100,6 +102,18 @@ def _pair_rows(table, measured: dict, entries: dict, test_set, seed_list, args) 
                 print(f"bench.run: WARNING: {table.key} row {row.name!r} (seed {seed}) does "
                       f"not render its baseline {base.name!r}'s image: max |diff| "
                       f"{check['max_diff']:.3g}", file=sys.stderr)
+    for c in table.comparisons:
+        row, other = rows[c.row], rows[c.against]
+        if row.baseline == other.name:
+            continue
+        for seed in seed_list:
+            pair = measure_pair(entries[row.name, seed].baked, row.render,
+                                entries[other.name, seed].baked, other.render, test_set,
+                                device=args.device, repeats=args.repeats,
+                                stage=table.paired_stage)["paired_speedup"]
+            m = measured[row.name, seed]
+            measured[row.name, seed] = replace(m, paired_with={**m.paired_with,
+                                                               other.name: pair})
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -164,6 +178,10 @@ def main(argv=None) -> int:
             raise ValueError("--address is for --executor ray")
         args.cache = args.cache or cache.cache_root()
         meta = options.run_meta(args.device)
+        if command.is_dirty(meta):
+            print(f"bench.run: WARNING: git {meta['git_revision']}: uncommitted changes; the "
+                  "results pages mark this run as not reproducible from a commit",
+                  file=sys.stderr)
         with (cluster.Session(args.address, args.torch_device) if args.executor == "ray"
               else contextlib.nullcontext()) as session:
             for key, table in zip(keys, tables):

@@ -283,3 +283,18 @@ def test_a_folder_outside_the_working_directory_and_home_is_recorded_as_given(tm
     monkeypatch.chdir(tmp_path / "a")
     assert shown_path(tmp_path / "home" / "x") == "~/x" and shown_path("~/y") == "~/y"
     assert shown_path("/mnt/shared/cache") == "/mnt/shared/cache"
+
+
+def test_a_claim_against_another_row_than_the_baseline_is_timed_as_pairs(fake_training,
+                                                                        tmp_path):
+    """Table 3 sets Separate-Att (V) against SUM, ... besides its baseline MLP: each claim's
+    speed-up is a geometric mean over interleaved pairs, pooled over the seeds."""
+    common = ["--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
+    assert run.main(["table3", "--seeds", "2"] + common) == 0
+    data = json.loads((tmp_path / "out" / "table3.json").read_text())
+    row = next(r for r in data["rows"] if r["row"] == "Separate-Att (V)")
+    assert set(row["paired_with"]) == {"SUM", "Shared-Att (Inv)", "Separate-Att (Inv)",
+                                       "Shared-Att (V)"}
+    for claim in data["comparisons"]:
+        assert claim["speedup"] == {"ratio": 1.5, "lo": 1.5, "hi": 1.5, "n": 16}
+        assert claim["speed_size"] is None

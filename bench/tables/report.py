@@ -122,6 +122,7 @@ def _record(table, row, m, stats: list[str], speedup, sample: str) -> dict:
             "per_seed": None if m.per_seed is None else [p.to_json() for p in m.per_seed],
             "spread": _spreads(table, m, stats),
             "paired_speedup": m.paired_speedup, "paired_at": m.paired_at,
+            "paired_with": m.paired_with,
             "same_image": m.same_image}
 
 
