@@ -102,9 +102,10 @@ def rows_table(data: dict) -> list[str]:
                       "n/a" if r["paper"].get(col) is None else fmt.format(r["paper"][col])]
         if baselines:
             base, mine = paper_time.get(r["baseline"]), paper_time[r["row"]]
-            cells += [compare.speedup_cell(None if r["speedup"] is None else
+            own = r["speedup"] is None or r["baseline"] == r["row"]     # none, or itself
+            cells += [compare.speedup_cell(None if own else
                                            r["paired_speedup"] or {"ratio": r["speedup"]}),
-                      "" if base is None or mine is None else f"{base / mine:.2f}x"]
+                      "" if own or base is None or mine is None else f"{base / mine:.2f}x"]
             cells += [compare.speedup_cell((r.get("paired_at") or {}).get(s)) for s in sizes]
         cells += ([_image(r["same_image"])] if images else []) + [f"{r['train_minutes']:.1f}"]
         lines.append("| " + " | ".join(cells) + " |")
