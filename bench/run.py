@@ -10,8 +10,11 @@
 Trains what is missing (models cached by a hash of config and data, shared across
 tables), bakes, renders every test view with the OpenCL renderer and writes
 ``results/TABLE.{md,csv,json,png}`` plus a sample render per row, then
-``results/README.md`` listing every table found there. With ``--executor ray`` the missing
-models are trained as Ray tasks first (bench/modelcache/cluster.py), then measured here.
+``results/README.md`` listing every table found there. A table's JSON records the command
+that made it (``argv``), its scene and cache folder as a user types them (relative to the
+working directory, or ``~/...``: :func:`bench.options.shown_path`). With ``--executor
+ray`` the missing models are trained as Ray tasks first (bench/modelcache/cluster.py),
+then measured here.
 ``python -m bench.run train-curve ARGS`` is ``python -m bench.train_curve ARGS``.
 """
 from __future__ import annotations
