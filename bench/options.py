@@ -1,9 +1,10 @@
 """Command-line options every benchmark entry point shares (``bench.run``,
-``bench.train_curve``) and the run's metadata they record."""
+``bench.train_curve``), the run's metadata they record and how they record a path."""
 from __future__ import annotations
 
 import argparse
 import datetime
+import os
 from pathlib import Path
 
 from clrender.cliopts import whole_number
@@ -36,3 +37,24 @@ def run_meta(device: str | None) -> dict:
 
     return {"device": get_runtime(device).name, "git_revision": provenance.git_revision(),
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+
+
+def shown_path(path) -> str:
+    """``path`` as a run records it, without the machine's folders: relative to the working
+    directory where it lies inside it (``data/lego``), else from the home folder
+    (``~/.cache/clrender``), else as given (a system, temporary or shared folder)."""
+    full = Path(os.path.abspath(Path(path).expanduser()))
+    for base, prefix in ((Path.cwd(), None), (Path.home(), Path("~"))):
+        if full == base or base in full.parents:
+            rel = full.relative_to(base)
+            return str(rel if prefix is None else prefix / rel)
+    return str(path)
+
+
+def shown_scene(scene: str, downscale: int = 1) -> str:
+    """A ``--scene`` as a run records it: a built-in name as it is, a folder by
+    :func:`shown_path`, with `` (downscale N)`` where read downscaled."""
+    from bench.modelcache.cache import BUILTIN_SCENES
+
+    name = scene if scene in BUILTIN_SCENES else shown_path(scene)
+    return name if downscale == 1 else f"{name} (downscale {downscale})"

@@ -10,8 +10,11 @@
 Trains what is missing (models cached by a hash of config and data, shared across
 tables), bakes, renders every test view with the OpenCL renderer and writes
 ``results/TABLE.{md,csv,json,png}`` plus a sample render per row, then
-``results/README.md`` listing every table found there. With ``--executor ray`` the missing
-models are trained as Ray tasks first (bench/modelcache/cluster.py), then measured here.
+``results/README.md`` listing every table found there. A table's JSON records the command
+that made it (``argv``), its scene and cache folder as a user types them (relative to the
+working directory, or ``~/...``: :func:`bench.options.shown_path`). With ``--executor
+ray`` the missing models are trained as Ray tasks first (bench/modelcache/cluster.py),
+then measured here.
 ``python -m bench.run train-curve ARGS`` is ``python -m bench.train_curve ARGS``.
 """
 from __future__ import annotations
@@ -27,8 +30,10 @@ from tqdm import tqdm
 from bench import options, train_curve
 from bench.modelcache import cache, cluster
 from bench.modelcache.fingerprint import code_fingerprint
-from bench.tables import ablation, report, seeds
+from bench.tables import ablation, command, report, seeds
+from bench.tools import public_scenes
 from clrender import methods
+from clrender.cli import USER_ERRORS, one_line_error
 
 
 def run_table(table, data: Path, fingerprint: str, args, meta: dict,
@@ -69,7 +74,7 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict,
     cam = test_set.cameras[0]
     meta = {**meta, "resolution": f"{cam.width}x{cam.height}",
             "code": {m: code_fingerprint(m) for m in sorted({r.method for r in table.rows})},
-            "cache": {"root": str(args.cache), "models": used},
+            "cache": {"root": options.shown_path(args.cache), "models": used},
             "wall_s": round(time.monotonic() - started, 1)}
     return report.write_table(args.out, table, results, meta)
 
@@ -77,7 +82,9 @@ def run_table(table, data: Path, fingerprint: str, args, meta: dict,
 def _pair_rows(table, measured: dict, entries: dict, test_set, seed_list, args) -> None:
     """Each row with a baseline timed against it as interleaved pairs, per seed (the
     baseline's model of the same seed; :func:`bench.tables.measure.measure_pair`), into
-    ``measured[row, seed]``'s ``paired_speedup``, ``paired_at`` and ``same_image``."""
+    ``measured[row, seed]``'s ``paired_speedup``, ``paired_at`` and ``same_image``; and
+    each comparison of a row against another than its baseline, at the test size, into
+    its ``paired_with``."""
     from dataclasses import replace
 
     from bench.tables.measure import measure_pair
@@ -99,6 +106,18 @@ def _pair_rows(table, measured: dict, entries: dict, test_set, seed_list, args) 
                 print(f"bench.run: WARNING: {table.key} row {row.name!r} (seed {seed}) does "
                       f"not render its baseline {base.name!r}'s image: max |diff| "
                       f"{check['max_diff']:.3g}", file=sys.stderr)
+    for c in table.comparisons:
+        row, other = rows[c.row], rows[c.against]
+        if row.baseline == other.name:
+            continue
+        for seed in seed_list:
+            pair = measure_pair(entries[row.name, seed].baked, row.render,
+                                entries[other.name, seed].baked, other.render, test_set,
+                                device=args.device, repeats=args.repeats,
+                                stage=table.paired_stage)["paired_speedup"]
+            m = measured[row.name, seed]
+            measured[row.name, seed] = replace(m, paired_with={**m.paired_with,
+                                                               other.name: pair})
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -135,6 +154,11 @@ def bake_options(given: list[str]) -> dict:
     return out
 
 
+def _one_table(argv: list[str], key: str) -> list[str]:
+    """The arguments that run the table ``key`` alone: ``all`` replaced by its name."""
+    return [key if a == "all" else a for a in argv]
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == [train_curve.KEY]:
@@ -158,21 +182,26 @@ def main(argv=None) -> int:
             raise ValueError("--address is for --executor ray")
         args.cache = args.cache or cache.cache_root()
         meta = options.run_meta(args.device)
+        if command.is_dirty(meta):
+            print(f"bench.run: WARNING: git {meta['git_revision']}: uncommitted changes; the "
+                  "results pages mark this run as not reproducible from a commit",
+                  file=sys.stderr)
         with (cluster.Session(args.address, args.torch_device) if args.executor == "ray"
               else contextlib.nullcontext()) as session:
-            for table in tables:
+            for key, table in zip(keys, tables):
                 started = time.monotonic()     # the table's wall time includes its scene
                 scene = args.scene or table.scene
                 data = cache.resolve_scene(scene, args.cache)
                 fingerprint = cache.data_fingerprint(data, args.downscale)
-                meta.update(preset=args.preset or table.preset, scene=scene
-                            if args.downscale == 1 else f"{scene} (downscale {args.downscale})")
+                meta.update(argv=command.recorded(_one_table(argv, key)),
+                            preset=args.preset or table.preset,
+                            scene=options.shown_scene(scene, args.downscale),
+                            public_scene=public_scenes.identify(data))
                 print(run_table(table, data, fingerprint, args, meta, session, started))
         report.write_index(args.out)
         print(f"results written to {args.out}/")
-    except ValueError as exc:
-        print(f"bench.run: error: {exc}", file=sys.stderr)
-        return 2
+    except USER_ERRORS as exc:
+        return one_line_error("bench.run", exc)
     except cluster.TaskFailed as exc:
         print(f"bench.run: error: {exc}", file=sys.stderr)
         return 1

@@ -51,6 +51,7 @@ from bench.modelcache import cache
 from bench.modelcache.fingerprint import code_fingerprint
 from bench.tables import ablation
 from clrender import methods
+from clrender.cli import USER_ERRORS, one_line_error
 from clrender.cliopts import whole_number
 from clrender.atomic import write_atomic
 
@@ -428,8 +429,7 @@ def run(args, meta: dict) -> str:
     fingerprint = cache.data_fingerprint(data, args.downscale)
     curves = curve_options(args.method, args.option)
     name = row.name if curves == [None] else f"{row.name} with the legend's options"
-    meta = {**meta, "scene": scene if args.downscale == 1
-            else f"{scene} (downscale {args.downscale})", "method": args.method,
+    meta = {**meta, "scene": options.shown_scene(scene, args.downscale), "method": args.method,
             "row": name if args.test_stride == 1
             else f"{name}, every {args.test_stride}th test view", "x_axis": args.x_axis}
     points, text = [], ""
@@ -484,9 +484,8 @@ def main(argv=None) -> int:
     args.cache = args.cache or cache.cache_root()
     try:
         print(run(args, options.run_meta(args.device)))
-    except ValueError as exc:
-        print(f"bench.train_curve: error: {exc}", file=sys.stderr)
-        return 2
+    except USER_ERRORS as exc:
+        return one_line_error("bench.train_curve", exc)
     print(f"results written to {args.out}/")
     return 0
 

@@ -6,7 +6,7 @@ writes a log for every build: its progress ("Compilation started", "Device build
 the backend options, the vectoriser's report per kernel and LLVM's optimisation remarks,
 and, for a kernel that declares its lanes with ``vec_type_hint`` of a vector type, the
 notice that it is not vectorised across work-items, which is what the hint asks for
-(docs/vendors.md, "Each kernel in its own lanes on both"). None of that can be silenced
+(docs/explanation/opencl.md, "Each kernel in its own lanes on both"). None of that can be silenced
 from the kernel source. :func:`build` drops the warning only where every line of every
 log it carries is one of those; any other line (a real compiler warning) keeps it, whole.
 
@@ -20,7 +20,7 @@ import os
 import re
 import warnings
 
-# Intel's CPU runtime (the release docs/vendors.md names): what it writes for a clean build.
+# Intel's CPU runtime (the release docs/explanation/opencl.md names): what it writes for a clean build.
 _INFO = re.compile("|".join([
     r"(Compilation|Linking|Device build) (started|done)",
     r"Options used by backend compiler: .*",

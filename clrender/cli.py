@@ -242,7 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(GLOMAP's: all rotations, then all positions; no drift round an "
                         "orbit); auto (default): incremental for an object on a transparent "
                         "background (its cameras then checked against the silhouettes), "
-                        "else global (see docs/capture.md)")
+                        "else global (see docs/guides/capture.md)")
     s.add_argument("--focal", type=_pixels, default=None, metavar="PX",
                    help="the photos' focal length in pixels, if known: the mapping's prior "
                         "(default: EXIF, else 1.2 times the larger image side, refined)")
@@ -325,7 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="glb: fit the vertex colours to the model's renders (default) or to "
                         "the training images of --data")
     s.add_argument("--threshold", type=float, default=None, metavar="ALPHA",
-                   help="glb of an NGP-RT model: the surface's alpha level (default 0.01)")
+                   help="glb of an NGP-RT model: the surface's alpha level (default 0.3)")
     s.add_argument("--extraction", default=None, choices=["tiny", "cpu", "paper"],
                    help="glb of an NGP-RT model: the extraction's size (density grid 64, 256, "
                         "512 a side; default cpu)")
@@ -357,15 +357,25 @@ def main(argv=None) -> int:
         if extra is None:
             raise
         return _error(args.command, extra)
-    except (ValueError, OSError, DeviceError, methods.PluginError) as exc:
+    except USER_ERRORS as exc:
         return _error(args.command, exc)
 
 
-def _error(command: str, exc: Exception) -> int:
-    """One line on stderr naming the problem; the exit status 2."""
+# What a user's input can raise (a bad file, folder, option, device or plug-in): reported
+# in one line. Anything else is a defect and keeps its traceback.
+USER_ERRORS = (ValueError, OSError, DeviceError, methods.PluginError)
+
+
+def one_line_error(prog: str, exc: Exception) -> int:
+    """Print ``PROG: error: ...`` (the message on one line) on stderr; returns 2, the exit
+    status."""
     text = " ".join(str(exc).split()) or type(exc).__name__
-    print(f"clrender {command}: error: {text}", file=sys.stderr)
+    print(f"{prog}: error: {text}", file=sys.stderr)
     return 2
+
+
+def _error(command: str, exc: Exception) -> int:
+    return one_line_error(f"clrender {command}", exc)
 
 
 if __name__ == "__main__":

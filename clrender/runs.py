@@ -64,7 +64,7 @@ def mse_psnr(mse: float) -> float:
 
 def finite_step(loss: torch.Tensor, params) -> bool:
     """Whether ``loss`` and the gradients of ``params`` are all finite: one fused norm over
-    the gradients, a single read of each (its cost: docs/training.md, "Steps that are not
+    the gradients, a single read of each (its cost: docs/guides/training.md, "Steps that are not
     finite"); a norm that overflows float32 counts as not finite."""
     grads = [p.grad for p in params if p.grad is not None]
     return bool(torch.isfinite(loss)) and bool(

@@ -97,7 +97,7 @@ typedef int16 lint;
 
 /* Triangle setup, LANES triangles a work-item, one per lane (on PoCL a scalar work-item
  * per triangle is slower: calls and gathers do not vectorise across work-items;
- * docs/rendering.md, "One triangle a setup work-item on GPUs"). Points and vectors are 3 lfloat (x, y, z), one triangle a lane; every
+ * docs/explanation/gpu-paths.md, "One triangle a setup work-item on GPUs"). Points and vectors are 3 lfloat (x, y, z), one triangle a lane; every
  * lane computes with the float32 operations of the scalar version (LANES = 1), in the
  * same order. */
 

@@ -39,7 +39,7 @@
  *   w1 (KSIZE*KSIZE, 3, H_STRIDE) [tap, out, in], b1 (3).
  * Speed: conv0 vectorises across output channels; a work-item prepares the
  * (SEG + PAD) x (ROWS + PAD) input pixels of its block once (hits, ray direction).
- * Plain a * b + c: mad()/fma() are several times slower on PoCL (docs/vendors.md,
+ * Plain a * b + c: mad()/fma() are several times slower on PoCL (docs/explanation/opencl.md,
  * "PoCL facts the kernels rely on"); the fast build turns contraction on, so they become
  * fused multiply-adds (PoCL does not contract under FP_CONTRACT OFF, even with
  * -cl-mad-enable).
@@ -171,7 +171,7 @@ inline int coverage(const Frame *f, int p)
 
 /* d, then sin(2^i d), cos(2^i d) for i < N_FREQ (shader_ref.view_encoding; 2^i d: exact
  * scaling, as in the reference), five frequencies at a time: one float16 call vectorises where a scalar call
- * per channel does not (docs/vendors.md, "PoCL facts the kernels rely on"). sincos() shares the range reduction; under
+ * per channel does not (docs/explanation/opencl.md, "PoCL facts the kernels rely on"). sincos() shares the range reduction; under
  * -D OCLGRIND separate sin() and cos(): sincos() breaks the --uninitialized plugin of
  * Oclgrind 21.10 (its output pointer). */
 inline void view_encoding(float3 d, float *v)

@@ -8,10 +8,10 @@
  * (-D DEFERRED_VEC = 1, 2, 4, 8 or 16), so the 5.8 k multiply-adds per pixel run as
  * SIMD on CPU devices without relying on the driver to vectorise across work-items;
  * the weights are read once per work-item and broadcast. Plain a * b + c: mad()/fma()
- * are several times slower on PoCL (docs/vendors.md, "PoCL facts the kernels rely on").
+ * are several times slower on PoCL (docs/explanation/opencl.md, "PoCL facts the kernels rely on").
  * The fast build turns contraction on (no geometry is computed here), so they become
  * fused multiply-adds: PoCL does not contract under FP_CONTRACT OFF even with
- * -cl-mad-enable, and runs this MLP slower without them (docs/vendors.md, "Each kernel
+ * -cl-mad-enable, and runs this MLP slower without them (docs/explanation/opencl.md, "Each kernel
  * in its own lanes on both"). A work-item whose pixels all have
  * opacity 0 (background) writes the background and skips the MLP: rgb * 0 + bg * 1 is bg
  * exactly.

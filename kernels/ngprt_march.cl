@@ -141,7 +141,7 @@ inline void write_pixel(const Rays *r, int j, int n, __global float *feat,
 
 /* vec_type_hint: the lanes are explicit (RAYS rays a work-item). Without it Intel's CPU
  * compiler scalarises the vectors and re-vectorises across work-items, far slower at 16
- * lanes (docs/vendors.md, "Each kernel in its own lanes on both"). A hint: it changes no
+ * lanes (docs/explanation/opencl.md, "Each kernel in its own lanes on both"). A hint: it changes no
  * result. */
 __kernel __attribute__((vec_type_hint(vfloat)))
 void ngprt_march(__global const float *cam, const int width, const int height,
@@ -191,7 +191,7 @@ void ngprt_march(__global const float *cam, const int width, const int height,
         const vint sample = active & VMASK(CODE_LEVEL(code) == 0);
         const vint empty = active & ~sample;
         /* Both counters here, outside the branches: counted inside composite, Intel's
-         * CPU compiler (RAYS = 1, no G) lost n_occ (docs/vendors.md, "Intel lost the
+         * CPU compiler (RAYS = 1, no G) lost n_occ (docs/explanation/opencl.md, "Intel lost the
          * march's sample count"). */
         r.n_march = lane_inc(r.n_march, active);
         r.n_occ = lane_inc(r.n_occ, sample);

@@ -11,7 +11,7 @@ import shutil
 import numpy as np
 import pytest
 
-from bench.speed.ngprt_kernels import main, measure
+from bench.speed.ngprt_kernels import main, measure, run
 from bench.speed.sizes import at_size, trained_test_set
 from clrender.camera import Camera, look_at
 from clrender.data import make_scene
@@ -78,6 +78,31 @@ def test_baseline_kernels_render_interleaved(tmp_path):
     camera = Camera.from_fov(0.8, 12, 10, look_at([0.3, -2.5, 1.2]))
     row = measure(model, [camera], True, 2, baseline=copy)
     assert row["baseline_same_counts"] and row["baseline_rgb_diff"] == 0.0
-    assert row["baseline"]["total"]["n"] == 2 and row["vs_baseline"] > 0
+    pairs = row["vs_baseline"]
+    assert row["baseline"]["total"]["n"] == 2 and pairs["n"] == 2
+    assert 0 < pairs["lo"] <= pairs["ratio"] <= pairs["hi"]
     with pytest.raises(FileNotFoundError, match="ngprt_march.cl"):
         Renderer(model, kernel_dir=str(tmp_path / "none"))
+
+
+def test_random_model_speedups_are_interleaved_pairs_with_an_interval(tmp_path, monkeypatch):
+    """Each variant against mlp, G on against off: a geometric mean over the repeats'
+    pairs with its 95% interval, as the tables state a speed-up (the device's rates, which
+    take longer to measure than the rest, given)."""
+    from bench.speed import ngprt_bounds, ngprt_kernels
+
+    def rates(model, device=None):
+        sizes = ngprt_bounds.table_bytes(model, "ours")
+        return {"gathers_per_s": {name: 1e9 for name in sizes}, "reference_gathers_per_s": {},
+                "flops_per_s": 1e10, "stream_bytes_per_s": 1e10, "table_bytes": sizes,
+                "march": "ours", "device": "d"}
+
+    monkeypatch.setattr(ngprt_kernels, "measure_limits", rates)
+    rows = run(16, 2, "tiny", "bounded", 8, tmp_path, variants=("mlp", "sum"))
+    by = {(r["variant"], r["use_G"]): r for r in rows}
+    assert "vs_mlp" not in by["mlp", True] and "G_speedup" not in by["sum", False]
+    for pairs in (by["sum", True]["vs_mlp"], by["sum", False]["vs_mlp"],
+                  by["sum", True]["G_speedup"], by["mlp", True]["G_speedup"]):
+        assert pairs["n"] == 2 and 0 < pairs["lo"] <= pairs["ratio"] <= pairs["hi"]
+    text = (tmp_path / "ngprt_kernels.md").read_text()
+    assert "speed-up vs mlp (95%)" in text and "geometric mean over interleaved pairs" in text

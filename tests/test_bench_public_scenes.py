@@ -4,6 +4,7 @@ without leaving a folder behind."""
 import json
 import shutil
 
+import numpy as np
 import pytest
 
 from bench.tools import public_scenes
@@ -39,7 +40,8 @@ def test_bonsai_folder_is_an_llff_scene_with_every_8th_view_held_out(tmp_path):
     assert files == [f"DSCF{5605 + i}.JPG" for i in range(public_scenes.BONSAI_FRAMES)]
 
 
-def test_lego_folder_holds_out_every_8th_train_frame(tmp_path):
+def fake_lego(tmp_path) -> dict:
+    """shouxieai/nerf's lego under ``tmp_path/nerf``; returns its train transforms."""
     root = tmp_path / "nerf" / "data" / "nerf_synthetic" / "lego"
     root.mkdir(parents=True)
     write_blender(root, n=public_scenes.LEGO_FRAMES)
@@ -47,6 +49,11 @@ def test_lego_folder_holds_out_every_8th_train_frame(tmp_path):
     for f in meta["frames"]:  # the public copy's paths have no extension
         f["file_path"] = f["file_path"].removesuffix(".png")
     (root / "transforms_train.json").write_text(json.dumps(meta))
+    return meta
+
+
+def test_lego_folder_holds_out_every_8th_train_frame(tmp_path):
+    meta = fake_lego(tmp_path)
     out = tmp_path / "lego"
     assert public_scenes.main(["lego", str(tmp_path / "nerf"), str(out)]) == 0
     summary = check_dataset(out)
@@ -73,3 +80,30 @@ def test_an_existing_output_folder_is_not_overwritten(tmp_path):
     with pytest.raises(ValueError, match="already exists"):
         public_scenes.build(out, lambda d: None)
     assert not any(out.iterdir())
+
+
+def test_an_assembled_folder_is_known_by_its_cameras_and_others_are_not(tmp_path, monkeypatch):
+    images, poses = fake_bonsai(tmp_path)
+    bonsai = tmp_path / "data" / "bonsai"
+    assert public_scenes.main(["bonsai", str(images), str(poses), str(bonsai)]) == 0
+    assert public_scenes.identify(bonsai) is None        # the fake's cameras are not bonsai's
+    hwf = np.load(bonsai / "poses_bounds.npy")[0, :15].reshape(3, 5)[:, 4]
+    monkeypatch.setattr(public_scenes, "BONSAI_HWF", tuple(hwf))
+    assert public_scenes.identify(bonsai) == "bonsai"
+    assert public_scenes.identify(tmp_path) is None
+    (tmp_path / "blender").mkdir()
+    write_blender(tmp_path / "blender", n=public_scenes.LEGO_FRAMES)
+    assert public_scenes.identify(tmp_path / "blender") is None      # 100 train frames
+    assert public_scenes.commands("lego", "data/lego") == [
+        "git clone https://github.com/shouxieai/nerf",
+        "python -m bench.tools.public_scenes lego nerf data/lego"]
+
+
+def test_the_lego_folder_is_known_by_its_field_of_view_and_split(tmp_path, monkeypatch):
+    fake_lego(tmp_path)
+    out = tmp_path / "lego"
+    assert public_scenes.main(["lego", str(tmp_path / "nerf"), str(out)]) == 0
+    fov = json.loads((out / "transforms_test.json").read_text())["camera_angle_x"]
+    assert public_scenes.identify(out) == ("lego" if fov == public_scenes.LEGO_FOV else None)
+    monkeypatch.setattr(public_scenes, "LEGO_FOV", fov)
+    assert public_scenes.identify(out) == "lego"

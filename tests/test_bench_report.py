@@ -80,7 +80,7 @@ def test_write_table_puts_paper_figures_beside_ours(tmp_path):
     t = ablation.load_table("table4")
     results = [_measured(20.0 + i, 10.0 + i) for i in range(len(t.rows))]
     meta = {"device": "dev", "preset": "cpu", "scene": "builtin-bounded", "resolution": "4x4",
-            "git_revision": "r", "date": "d"}
+            "git_revision": "r", "date": "d", "argv": ["t"]}
     md = report.write_table(tmp_path, t, results, meta)
     line = next(l for l in md.splitlines() if l.startswith("| L=2 paper w/o G"))
     cells = [c.strip() for c in line.strip("|").split("|")]
@@ -97,13 +97,12 @@ def test_write_table_puts_paper_figures_beside_ours(tmp_path):
 
 def test_lpips_is_reported_beside_the_paper_or_as_not_measured(tmp_path):
     t = ablation.load_table("table2")
-    meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4"}
     results = [_measured(25.0, 5.0)] * 3
-    md = report.markdown(t, results, meta, compare.measure(t, results))
+    md = report.write_table(tmp_path, t, results, META)
     row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
-    assert "| n/a | 0.299 |" in row and "LPIPS: n/a where its weights" in md
+    assert "| n/a | 0.299 |" in row and "n/a without its weights" in md
     results = [_measured(25.0, 5.0, lpips=0.2)] * 3
-    md = report.markdown(t, results, meta, compare.measure(t, results))
+    md = report.write_table(tmp_path, t, results, META)
     row = next(l for l in md.splitlines() if l.startswith("| NGP-RT (L=2)"))
     assert "| 0.200 | 0.299 |" in row and "LPIPS: AlexNet, linear heads v0.1" in md
 
@@ -116,7 +115,7 @@ def test_speedup_is_baseline_time_over_row_time(tmp_path):
     paper = report.speedups(t, results, key=lambda row, m: row.paper.get("Time (ms)"))
     assert paper[1] == pytest.approx(9.98 / 9.26)
     meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4",
-            "git_revision": "r", "date": "d"}
+            "git_revision": "r", "date": "d", "argv": ["t"]}
     md = report.write_table(tmp_path, t, results, meta)
     row = next(l for l in md.splitlines() if l.startswith("| L=3 paper w/ G"))
     assert "| 1.20x | 1.11x |" in row
@@ -143,19 +142,16 @@ def test_paired_speedup_counts_and_images_are_printed(tmp_path):
                                     else 0.25, "views": 2})
         results.append(m)
     meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4",
-            "git_revision": "r", "date": "d"}
+            "git_revision": "r", "date": "d", "argv": ["t"]}
     md = report.write_table(tmp_path, t, results, meta)
     head = next(l for l in md.splitlines() if l.startswith("| Row"))
-    assert "march ms, test size (paired)" in head and "Speed-up at 1920x1080" in head
+    assert "Speed-up at 1920x1080" in head and "Image vs baseline" in head
     cells = lambda name: [c.strip() for c in next(
         l for l in md.splitlines() if l.startswith(f"| {name} |")).strip("|").split("|")]
-    ours, paper_g, base = cells("L=2 ours"), cells("L=2 paper w/ G"), cells("L=2 paper w/o G")
+    ours, paper_g = cells("L=2 ours"), cells("L=2 paper w/ G")
     assert "1.25x (1.10-1.40, 8 pairs)" in ours and "0.90x (0.80-1.05, 8 pairs)" in ours
-    assert "4.00" in ours and "90.00" in ours and "identical" in ours
-    assert "Marching 0.500x, Occupied 1.000x" in ours
-    assert "**DIFFERS** (max 0.25)" in paper_g
-    assert "5.00" in base and "81.00" in base               # the baseline's time, from its pairs
-    assert "interleaved pairs" in md and "bit for bit" in md
+    assert "identical" in ours and "differs (max 0.25)" in paper_g
+    assert "geometric mean over interleaved pairs" in md and "bit for bit" in md
     data = json.loads((tmp_path / "table4.json").read_text())
     assert data["rows"][2]["paired_speedup"]["ratio"] == 1.25
     assert data["rows"][2]["paired_at"]["1920x1080"]["lo"] == 0.8
@@ -251,10 +247,10 @@ def test_a_table_may_mix_methods(tmp_path):
                         time_at={800: _time(300.0)},
                         stages={"intersect": 12.0, "gather": 3.0, "conv0": 4.0, "conv1": 1.0})
     meta = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4",
-            "git_revision": "r", "date": "d"}
+            "git_revision": "r", "date": "d", "argv": ["t"]}
     md = report.write_table(tmp_path, t, [teacher, student], meta)
     row = next(l for l in md.splitlines() if l.startswith("| Student"))
-    assert "| 2.00x |" in row and "| 300.0 |" in row and "intersect 12.0" in row
+    assert "| 2.00x |" in row
     assert "kernels; embree + kernels" in md
     data = json.loads((tmp_path / "ndrf-teacher.json").read_text())
     assert data["rows"][1]["Marching"] is None and data["rows"][1]["Coverage"] == 0.5
@@ -275,7 +271,7 @@ def _cells(md: str, row: str) -> list[str]:
 
 
 META = {"device": "d", "preset": "cpu", "scene": "s", "resolution": "4x4", "git_revision": "r",
-        "date": "d"}
+        "date": "d", "argv": ["t"]}
 
 
 def test_seeds_give_mean_spread_and_the_claims_verdicts(tmp_path):
@@ -295,7 +291,7 @@ def test_seeds_give_mean_spread_and_the_claims_verdicts(tmp_path):
         "+0.29", "reproduces", "0.92x", "0.74x", "", ""]
     assert _cells(md, "NGP-RT (L=4) − NGP-RT (L=2)")[2:6] == [
         "-1.00 ± 0.10", "[-1.25, -0.75] (95%)", "+0.41", "opposite"]
-    assert "over 3 training seeds (0, 1, 2)" in md and "no correction for the number" in md
+    assert "over 3 training seeds (0, 1, 2)" in md
     data = json.loads((tmp_path / "table2.json").read_text())
     row = data["rows"][1]
     assert row["seeds"] == [0, 1, 2] and [p["PSNR"] for p in row["per_seed"]] == [21.0, 21.3, 21.1]
@@ -360,7 +356,7 @@ def test_index_lists_every_table_written_with_its_own_run(tmp_path):
     t3 = ablation.load_table("ndrf-table3")
     single = ablation.load_table("ndrf-thresholds")
     meta = {"device": "dev A", "preset": "cpu", "scene": "builtin-bounded", "resolution": "4x4",
-            "git_revision": "r1", "date": "2026-01-01"}
+            "git_revision": "r1", "date": "2026-01-01", "argv": ["t"]}
     measured = _measured(21.0, 20.0, stages={"intersect": 1.0})
     report.write_table(tmp_path, single, [measured] * len(single.rows), meta)
     report.write_index(tmp_path)
@@ -398,9 +394,11 @@ def test_the_summary_has_each_claim_and_is_copied_between_the_markers(tmp_path):
     assert report.main(["--results", str(out), "--readme", str(readme)]) == 0
     text = readme.read_text()
     assert text.startswith("# x\n\n## Results\nintro\n") and text.endswith(f"{summary.END}\nafter\n")
-    assert "old" not in text and summary.summary(out, dated=False).strip() in text
-    assert "3 seeds, `cpu` preset, s scene, d." in text and "git r" not in text   # no dates
-    assert summary.copy_into(readme, summary.summary(out, dated=False)) is False   # not written
+    assert "old" not in text and summary.readme_summary(out).strip() in text
+    assert ("| Table 2: fine-grained hash levels L, s scene | NGP-RT (L=3) − NGP-RT (L=2) | "
+            "+1.03 ± 0.06 [+0.89, +1.18] | +0.29 | 0.92x | 0.74x | reproduces |") in text
+    assert "git r" not in text and ", d," not in text                  # no dates, revisions
+    assert summary.copy_into(readme, summary.readme_summary(out)) is False   # not written
 
 
 def test_summary_errors_name_the_file(tmp_path, capsys):
@@ -420,10 +418,13 @@ def test_the_projects_readme_takes_the_summary(tmp_path):
     from pathlib import Path
 
     readme = tmp_path / "README.md"
-    readme.write_text((Path(__file__).resolve().parents[1] / "README.md").read_text())
+    original = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    readme.write_text(original)
     assert summary.copy_into(readme, "generated") is True
     text = readme.read_text()
-    assert f"{summary.BEGIN}\ngenerated\n{summary.END}" in text and "## Usage" in text
+    assert f"{summary.BEGIN}\ngenerated\n{summary.END}" in text
+    assert text.split(summary.BEGIN)[0] == original.split(summary.BEGIN)[0]
+    assert text.split(summary.END)[1] == original.split(summary.END)[1]
 
 
 @pytest.mark.parametrize("ours, paper, verdict", [

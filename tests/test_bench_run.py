@@ -242,3 +242,59 @@ def test_a_resumed_training_counts_the_earlier_processes_up_to_where_each_was_re
     (tmp_path / "log.jsonl").write_text("".join(json.dumps(line) + "\n"
                                                 for line in process(0, 1999, 0.1)))
     assert cache.earlier_seconds(tmp_path) == 0.0
+
+
+def test_a_run_records_its_command_and_folders_as_a_user_types_them(fake_training, tmp_path,
+                                                                    monkeypatch):
+    """The scene relative to the working directory, the cache from the home folder; the
+    table's Markdown shows the command without the folders files go to."""
+    home = tmp_path / "home"
+    work = home / "work"
+    (work / "data" / "scene").mkdir(parents=True)
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(work)
+    assert run.main(["ndrf-teacher", "--scene", str(work / "data" / "scene"), "--downscale",
+                     "2", f"--cache={home / '.cache' / 'c'}", "--out", str(work / "out")]) == 0
+    data = json.loads((work / "out" / "ndrf-teacher.json").read_text())
+    assert data["argv"] == ["ndrf-teacher", "--scene", "data/scene", "--downscale", "2",
+                            "--cache=~/.cache/c", "--out", "out"]
+    assert data["scene"] == "data/scene (downscale 2)" and data["cache"]["root"] == "~/.cache/c"
+    assert data["public_scene"] is None
+    md = (work / "out" / "ndrf-teacher.md").read_text()
+    assert "```bash\npython -m bench.run ndrf-teacher --scene data/scene --downscale 2\n```" in md
+    assert "**NDRF Table 4 analog" in md and "data/scene (downscale 2) scene**" in md
+
+
+def test_all_records_each_tables_own_command():
+    assert run._one_table(["all", "--seeds", "3"], "table2") == ["table2", "--seeds", "3"]
+    assert run._one_table(["table3", "--bake", "a=b"], "table3") == ["table3", "--bake", "a=b"]
+
+
+def test_a_folder_outside_the_working_directory_and_home_is_recorded_as_given(tmp_path,
+                                                                              monkeypatch):
+    from bench.options import shown_path
+
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.chdir(tmp_path)
+    assert shown_path(tmp_path / "a" / "b") == "a/b" and shown_path("a/../c") == "c"
+    assert shown_path(tmp_path) == "."
+    assert shown_path(tmp_path / "home" / "x") == "home/x"    # the working directory first
+    (tmp_path / "a").mkdir()
+    monkeypatch.chdir(tmp_path / "a")
+    assert shown_path(tmp_path / "home" / "x") == "~/x" and shown_path("~/y") == "~/y"
+    assert shown_path("/mnt/shared/cache") == "/mnt/shared/cache"
+
+
+def test_a_claim_against_another_row_than_the_baseline_is_timed_as_pairs(fake_training,
+                                                                        tmp_path):
+    """Table 3 sets Separate-Att (V) against SUM, ... besides its baseline MLP: each claim's
+    speed-up is a geometric mean over interleaved pairs, pooled over the seeds."""
+    common = ["--cache", str(tmp_path / "cache"), "--out", str(tmp_path / "out")]
+    assert run.main(["table3", "--seeds", "2"] + common) == 0
+    data = json.loads((tmp_path / "out" / "table3.json").read_text())
+    row = next(r for r in data["rows"] if r["row"] == "Separate-Att (V)")
+    assert set(row["paired_with"]) == {"SUM", "Shared-Att (Inv)", "Separate-Att (Inv)",
+                                       "Shared-Att (V)"}
+    for claim in data["comparisons"]:
+        assert claim["speedup"] == {"ratio": 1.5, "lo": 1.5, "hi": 1.5, "n": 16}
+        assert claim["speed_size"] is None

@@ -140,3 +140,16 @@ def test_version_is_the_package_metadata(capsys):
     assert stop.value.code == 0
     assert capsys.readouterr().out == f"clrender {metadata.version('clrender')}\n"
     assert clrender.__version__ == metadata.version("clrender")
+
+
+@pytest.mark.parametrize("module", ["bench.run", "bench.train_curve"])
+def test_the_benchmarks_name_a_missing_device_in_one_line(module, tmp_path, capsys):
+    import importlib
+
+    main = importlib.import_module(module).main
+    argv = (["table4"] if module == "bench.run" else []) + [
+        "--preset", "tiny", "--device", NO_DEVICE, "--out", str(tmp_path / "out")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"{module}: error: no OpenCL device matches")
+    assert not (tmp_path / "out").exists()

@@ -1,5 +1,5 @@
 """bench.speed.paper_smoke's memory figures for NDRF's views (clrender/ndrf/paper_smoke.py) are a
-real ViewSet's: the bytes per view it reports (and docs/cluster.md quotes: 23 MB at 800x800,
+real ViewSet's: the bytes per view it reports (and docs/guides/cluster.md quotes: 23 MB at 800x800,
 K = 2) equal the tensors ``ViewSet.build`` holds per view, exactly, in memory or disk-backed, and a disk-backed view
 keeps the resident bytes it reports. The smoke run itself trains `paper`-sized models for
 minutes: a benchmark (``python -m bench.speed.paper_smoke``), not a test."""

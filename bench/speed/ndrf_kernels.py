@@ -10,8 +10,10 @@ pixel aspect kept: a square test camera at 1920x1080 sees a wider view, not a st
 one). Stages: ``intersect`` (the rasteriser's kernels, or Embree on the host plus the upload),
 ``conv0`` (with the gather of the screen pixels) and ``conv1``, kernel times from profiling
 events; median and p10-p90 over every camera and repeat after one warm-up frame each.
-With ``--teacher`` the NGP-RT teacher renders the same cameras in the same run: the
-student's speed-up is the teacher's median frame time over the student's (raster path).
+With ``--teacher`` the NGP-RT teacher renders the same cameras in the same run, as
+interleaved pairs with the student (raster path; :func:`bench.tables.measure.time_pairs`):
+the student's speed-up is the geometric mean of teacher / student frame time over the pairs,
+with its 95% interval.
 
 Bounds, from this device's rates measured here (:mod:`bench.speed.limits`): conv0 and conv1 from
 their FLOPs (:func:`counters`: conv0 as the kernel computes it, factored by linearity into
@@ -32,9 +34,12 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.options import shown_path
 from bench.speed.limits import flop_rate, gather_rate
 from bench.speed.ngprt_kernels import TRAINED_SIZES
 from bench.speed.sizes import at_size, parse_size, trained_test_set
+from bench.tables.compare import speedup_cell
+from bench.tables.measure import time_pairs
 from clrender import methods
 from clrender.atomic import write_atomic
 from clrender.cliopts import whole_number
@@ -112,14 +117,14 @@ def measure(renderer, cameras, repeats: int) -> dict:
             "counters": counters(renderer.model, first)}
 
 
-def teacher_ms(teacher_path, cameras, repeats: int, device=None) -> dict:
-    """The NGP-RT teacher's frame times over the same cameras (default render options)."""
-    renderer = AnyRenderer(teacher_path, device=device)
-    times = []
-    for camera in cameras:
-        renderer.render(camera)
-        times += [renderer.render(camera)["ms"] for _ in range(repeats)]
-    return summarize_ms(times)
+def teacher_pairs(teacher_path, student, cameras, repeats: int, device=None) -> dict:
+    """The NGP-RT teacher (default render options) against ``student`` (a renderer) on
+    the same cameras as interleaved pairs (:func:`bench.tables.measure.time_pairs`):
+    ``ratio`` (teacher / student, >1: the student is faster), its 95% interval ``lo``-``hi``
+    over ``n`` pairs, the medians ``ms_baseline`` (teacher) and ``ms_row`` (student)."""
+    pairs = time_pairs(student, AnyRenderer(teacher_path, device=device), cameras, repeats,
+                       None)
+    return {k: v for k, v in pairs.items() if k != "ratios"}
 
 
 def bounds(row: dict, rates: dict) -> dict:
@@ -136,16 +141,19 @@ def _fmt(s: dict) -> str:
 
 def markdown(rows: list[dict], meta: dict) -> str:
     head = ["frame", "hits", "intersect ms", "conv0 ms (bound)", "conv1 ms (bound)",
-            "total ms", "FPS", "raster ns / triangle, / hit", "teacher ms", "speed-up"]
+            "total ms", "FPS", "raster ns / triangle, / hit", "teacher ms, median (paired)",
+            "speed-up vs teacher (95%)"]
     lines = ["## NDRF renderer stages", "",
              f"{meta['device']}; {meta['model']}; {meta['views']}; {meta['repeats']} repeats "
-             f"after a warm-up, median (p10-p90). Rates measured here: "
+             f"after a warm-up; stage times: median (p10-p90). Rates measured here: "
              f"{meta['rates']['flops_per_s'] / 1e9:.0f} GFLOP/s, "
              f"{meta['rates']['gathers_per_s'] / 1e9:.2f} G random float8 gathers/s. "
              "Bounds: conv0 at the FLOP rate (+ the time of its gathered rows at the "
              "random-gather rate, an upper estimate: neighbouring pixels share vertices, so "
              "most rows come from cache), conv1 at the FLOP rate. Speed-up: the "
-             "NGP-RT teacher's median frame time over this row's, same cameras, same run.", "",
+             "NGP-RT teacher's frame time over this row's, rendered as interleaved pairs on "
+             "the same cameras (the order swapped every pair): the geometric mean over the "
+             "pairs with its 95% interval.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         b, c, t = r["bound"], r["counters"], r["total"]["median"]
@@ -157,8 +165,8 @@ def markdown(rows: list[dict], meta: dict) -> str:
             r["frame"], r["hits"], _fmt(r["intersect"]),
             f"{_fmt(r['conv0'])} ({b['conv0']:.1f} + {b['gather']:.1f})",
             f"{_fmt(r['conv1'])} ({b['conv1']:.1f})", _fmt(r["total"]), f"{1000.0 / t:.1f}",
-            per_tri, _fmt(teacher) if teacher else "",
-            f"{teacher['median'] / t:.2f}x" if teacher else ""]) + " |")
+            per_tri, f"{teacher['ms_baseline']:.1f}" if teacher else "",
+            speedup_cell(teacher)]) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -172,7 +180,8 @@ def run(model, frames: dict, repeats: int, out: Path, name: str, views: str, dev
                                                                             runtime)}
     rows = []
     for label, cameras in frames.items():
-        t = teacher_ms(teacher, cameras, repeats, runtime) if teacher else None
+        t = (teacher_pairs(teacher, renderers["raster"], cameras, repeats, runtime)
+             if teacher else None)
         for hits, renderer in renderers.items():
             row = {"frame": label, "hits": hits, **measure(renderer, cameras, repeats)}
             row["bound"] = bounds(row, rates)
@@ -226,8 +235,8 @@ def main(argv=None) -> int:
     for text in args.frames:
         w, h = parse_size(text)
         frames[f"{w}x{h}"] = [at_size(c, w, h) for c in cams]
-    run(model, frames, args.repeats, args.out, str(args.model),
-        f"{len(cams)} test cameras of {args.data}", args.device, args.teacher)
+    run(model, frames, args.repeats, args.out, shown_path(args.model),
+        f"{len(cams)} test cameras of {shown_path(args.data)}", args.device, args.teacher)
     return 0
 
 

@@ -13,10 +13,13 @@ occupancy distance grid G, renders one orbit view and reports the march and defe
 kernel times (OpenCL profiling events; median and p10-p90 over the repeats, after one
 warm-up render), the marching and occupied points per ray, each stage's bound and the
 ratio time / bound (:mod:`bench.speed.limits`: the stage's own counters at the gather and FLOP
-rates measured on the device in the same run), and the speed-ups: each variant against
-``mlp``, G on against G off, and OpenCL against the numpy reference. The reference is
-timed once per variant (with G) on a smaller frame (``--ref-size``) and scaled by the
-pixel count; the table says so. Writes ``<out>/ngprt_kernels.{json,md}``.
+rates measured on the device in the same run), and the speed-ups, each the geometric mean
+over ``--repeats`` interleaved pairs with its 95% interval
+(:func:`bench.tables.measure.time_pairs`, on the frame's kernel time): each variant against
+``mlp``, G on against G off. The numpy reference is timed once per variant (with G) on a
+smaller frame (``--ref-size``) and scaled by the pixel count: its ratio to the OpenCL time
+is a scale, not a paired speed-up; the table says so. Writes
+``<out>/ngprt_kernels.{json,md}``.
 
 Trained model (``--model M.npz --data DIR``): its one variant, with G, on the first
 ``--views`` test cameras of DIR at the test size and at ``--sizes`` (default 800x800 and
@@ -25,22 +28,27 @@ Trained model (``--model M.npz --data DIR``): its one variant, with G, on the fi
 ``<out>/ngprt_kernels_<model stem>.{json,md}``.
 
 ``--baseline DIR`` renders every row with the kernel sources of DIR too (e.g. a copy of an
-older ``kernels/``), interleaved with the installed ones, and adds their time, the ratio
-and whether images and counters agree. Never asserts.
+older ``kernels/``), interleaved with the installed ones, and adds their time, the
+speed-up over those pairs (geometric mean, 95% interval) and whether images and counters
+agree. Never asserts.
 """
 from __future__ import annotations
 
 import argparse
 import datetime
+import functools
 import json
 import time
 from pathlib import Path
 
 import numpy as np
 
+from bench.options import shown_path
 from bench.speed.ngprt_bounds import (MARCH_PIXEL_BYTES, deferred_bound, march_bound,
                                       measure_limits)
 from bench.speed.sizes import at_size, parse_size, trained_test_set
+from bench.tables.compare import speedup_cell
+from bench.tables.measure import speedup_interval, time_pairs
 from clrender.atomic import write_atomic
 from clrender.cliopts import whole_number
 from clrender.device import get_runtime
@@ -66,10 +74,11 @@ def measure(model, cameras, use_G: bool, repeats: int, device=None, exact: bool 
 
     With ``baseline`` (a folder of kernel sources, e.g. an older ``kernels/``) the same
     renders run with those kernels too, interleaved repeat by repeat (the order swapped
-    every repeat), and the row gets their times, ``vs_baseline`` (the median over repeats
-    of baseline total / this total, each pair rendered back to back, so a change in the
-    load of shared cores moves both; >1 = these kernels faster) with its p10-p90, the
-    largest rgb difference and whether every pixel's counters agree.
+    every repeat), and the row gets their times, ``vs_baseline`` (baseline total / this
+    total over the pairs, each rendered back to back so a change in the load of shared
+    cores moves both: :func:`bench.tables.measure.speedup_interval`'s geometric mean
+    ``ratio`` and 95% interval ``lo``-``hi`` over ``n`` pairs; >1 = these kernels faster),
+    the largest rgb difference and whether every pixel's counters agree.
     """
     renderers = {"now": Renderer(model, device=device, use_G=use_G, exact=exact,
                                  count_reads=True)}
@@ -103,8 +112,7 @@ def measure(model, cameras, use_G: bool, repeats: int, device=None, exact: bool 
                       "G": float(np.mean([c[4] for c in counts]))})
     if baseline is not None:
         row["baseline"] = _time_summary(times["baseline"])
-        row["vs_baseline"] = float(np.median(pairs))
-        row["vs_baseline_p10_p90"] = [float(np.percentile(pairs, q)) for q in (10, 90)]
+        row["vs_baseline"] = speedup_interval(pairs)
         row["baseline_rgb_diff"], row["baseline_same_counts"] = rgb_diff, same
     if limits is not None:
         n = cameras[0].width * cameras[0].height
@@ -115,6 +123,17 @@ def measure(model, cameras, use_G: bool, repeats: int, device=None, exact: bool 
         for stage in ("march", "deferred"):
             row["bound"][stage]["ratio"] = row[stage]["median"] / row["bound"][stage]["ms"]
     return row
+
+
+def paired_speedup(row: tuple, base: tuple, camera, repeats: int, device=None,
+                   exact: bool = False) -> dict:
+    """``base``'s frame time over ``row``'s (each a (model, use_G)), rendered as
+    ``repeats`` interleaved pairs (:func:`bench.tables.measure.time_pairs`): {ratio, lo, hi
+    (95% interval), n}, >1: ``row`` is faster."""
+    renderers = [Renderer(model, device=device, use_G=use_G, exact=exact)
+                 for model, use_G in (row, base)]
+    pairs = time_pairs(*renderers, [camera], repeats, None, (1.0, 1.0, 1.0))
+    return {k: pairs[k] for k in ("ratio", "lo", "hi", "n")}
 
 
 def _time_summary(times: dict) -> dict:
@@ -141,9 +160,13 @@ def _fmt_bound(r: dict, stage: str) -> str:
     return f"{b['ms']:.1f} / {b['ratio']:.2f}x"
 
 
-STAGE_HEAD = ["march ms (p10-p90)", "march bound ms / ratio", "deferred ms (p10-p90)",
-              "deferred bound ms / ratio", "total ms", "marching/ray", "occupied/ray", "covered"]
-BASELINE_HEAD = ["baseline total ms", "vs baseline (p10-p90)",
+PAIRS_NOTE = ("Speed-ups: the other's frame time over this row's (>1: this row is faster), "
+              "the geometric mean over interleaved pairs (rendered back to back, the order "
+              "swapped every pair) with its 95% interval (t over the pairs' log ratios).")
+STAGE_HEAD = ["march ms, median (p10-p90)", "march bound ms / ratio",
+              "deferred ms, median (p10-p90)", "deferred bound ms / ratio", "total ms, median",
+              "marching/ray", "occupied/ray", "covered"]
+BASELINE_HEAD = ["baseline total ms, median", "speed-up vs baseline (95%)",
                  "baseline max rgb diff / same counts"]
 
 
@@ -152,9 +175,7 @@ def _stage_cells(r: dict) -> list[str]:
              _fmt_bound(r, "deferred"), f"{r['total']['median']:.1f}", f"{r['marching']:.2f}",
              f"{r['occupied']:.2f}", f"{r['covered']:.2f}"]
     if "baseline" in r:
-        lo, hi = r["vs_baseline_p10_p90"]
-        cells += [f"{r['baseline']['total']['median']:.1f}",
-                  f"{r['vs_baseline']:.2f}x ({lo:.2f}-{hi:.2f})",
+        cells += [f"{r['baseline']['total']['median']:.1f}", speedup_cell(r["vs_baseline"]),
                   f"{r['baseline_rgb_diff']:.1e} / {'yes' if r['baseline_same_counts'] else 'NO'}"]
     return cells
 
@@ -181,9 +202,9 @@ def bounds_note(meta: dict) -> str:
             f"and streamed bytes not overlapped; ratio = time / bound.")
     if meta.get("baseline"):
         note += (f" Baseline: the kernels of `{meta['baseline']}`, rendered interleaved with "
-                 f"these in the same run, the order swapped every repeat; vs baseline = the "
-                 f"median (p10-p90) over repeats of its total / this total, each pair "
-                 f"rendered back to back (>1: these kernels are faster).")
+                 f"these in the same run, the order swapped every repeat; speed-up vs "
+                 f"baseline = the geometric mean over the pairs of its total / this total "
+                 f"with its 95% interval (>1: these kernels are faster).")
     return note
 
 
@@ -197,25 +218,25 @@ def _section(title: str, intro: str, head: list[str], rows: list[list[str]]) -> 
 
 
 def markdown(rows: list[dict], meta: dict) -> str:
-    head = ["variant", "G"] + STAGE_HEAD + ["vs mlp", "G on vs off", "CL vs ref"]
+    head = ["variant", "G"] + STAGE_HEAD + ["speed-up vs mlp (95%)",
+                                            "speed-up G on vs off (95%)", "ref ms / CL ms"]
     head += BASELINE_HEAD if meta.get("baseline") else []
     intro = (f"{meta['device']}; `{meta['preset']}` preset ({meta['config']}), {meta['scene']} "
              f"random structured model, {meta['size']}x{meta['size']} orbit view, "
              f"{meta['build']} build, {meta['repeats']} repeats after a warm-up. "
              f"{bounds_note(meta)} The bounds use the separate-v model's tables (other "
-             f"variants differ slightly). Speed-ups: time of the other / this row's time, "
-             f">1 = this row is faster. The numpy reference was timed once per variant (with "
-             f"G) on a {meta['ref_size']}^2 frame and scaled by pixel count.")
+             f"variants differ slightly). {PAIRS_NOTE} The numpy reference was timed once "
+             f"per variant (with G) on a {meta['ref_size']}^2 frame and scaled by pixel "
+             f"count: ref ms / CL ms is a scale, not paired.")
     cells = [[r["variant"], "on" if r["use_G"] else "off"] + _stage_cells(r)[:8] + [
-        f"{r['vs_mlp']:.2f}x" if "vs_mlp" in r else "",
-        f"{r['G_speedup']:.2f}x" if r["use_G"] else "",
+        speedup_cell(r.get("vs_mlp")), speedup_cell(r.get("G_speedup")),
         f"{r['vs_ref']:.0f}x" if r.get("vs_ref") else ""] + _stage_cells(r)[8:] for r in rows]
     return _section("NGP-RT OpenCL kernels", intro, head, cells)
 
 
 def _print_row(label: str, m: dict) -> None:
     b = m["bound"]
-    extra = (f"  vs baseline {m['vs_baseline']:.2f}x (rgb diff {m['baseline_rgb_diff']:.1e}, "
+    extra = (f"  vs baseline {speedup_cell(m['vs_baseline'])} (rgb diff {m['baseline_rgb_diff']:.1e}, "
              f"same counts {m['baseline_same_counts']})" if "baseline" in m else "")
     print(f"{label} march {m['march']['median']:7.1f} ms (bound {b['march']['ms']:.1f}, "
           f"{b['march']['ratio']:.2f}x)  deferred {m['deferred']['median']:6.1f} ms (bound "
@@ -232,26 +253,27 @@ def _write(out: Path, name: str, text: str, meta: dict, rows: list[dict]) -> Non
 def run(size: int, repeats: int, preset_name: str, scene: str, ref_size: int, out: Path,
         device=None, seed: int = 0, gamma: float = 1.0, L_C: int | None = None,
         exact: bool = False, variants=VARIANTS, baseline=None) -> list[dict]:
-    rows, refs = [], {}
+    rows, refs, models = [], {}, {}
     camera = _camera(scene, size)
     grid = {} if L_C is None else {"L_C": L_C, "G_res": L_C // 2}   # G at L_C / 2 as in S2.5
     limits = measure_limits(random_baked_model(
         preset(preset_name, variant="separate-v", scene=scene, **grid), seed, gamma), device)
     for variant in variants:
         config = preset(preset_name, variant=variant, scene=scene, **grid)
-        model = random_baked_model(config, seed, gamma)
+        model = models[variant] = random_baked_model(config, seed, gamma)
         for use_G in (True, False):
             m = measure(model, [camera], use_G, repeats, device, exact, limits, baseline)
             rows.append({"variant": variant, "use_G": use_G, **m})
             _print_row(f"{variant:13s} G={'on ' if use_G else 'off'}", m)
         refs[variant] = time_reference(model, camera, ref_size, size)
-    mlp = {r["use_G"]: r["total"]["median"] for r in rows if r["variant"] == "mlp"}
+    pair = functools.partial(paired_speedup, camera=camera, repeats=repeats, device=device,
+                             exact=exact)
     for r in rows:
-        if mlp:
-            r["vs_mlp"] = mlp[r["use_G"]] / r["total"]["median"]
-        off = next(x for x in rows if x["variant"] == r["variant"] and not x["use_G"])
-        r["G_speedup"] = off["total"]["median"] / r["total"]["median"]
+        this = (models[r["variant"]], r["use_G"])
+        if "mlp" in models and r["variant"] != "mlp":
+            r["vs_mlp"] = pair(this, (models["mlp"], r["use_G"]))
         if r["use_G"]:
+            r["G_speedup"] = pair(this, (models[r["variant"]], False))
             r["reference"] = refs[r["variant"]]
             r["vs_ref"] = refs[r["variant"]]["ms_scaled"] / r["total"]["median"]
     meta = {"device": get_runtime(device).name, "preset": preset_name, "scene": scene,
@@ -306,7 +328,8 @@ def run_trained(model_path: Path, data: Path, sizes, repeats: int, out: Path, de
                      **m})
         _print_row(f"{size:>9s} {model.config.variant}", m)
     cfg = model.config
-    meta = {"device": get_runtime(device).name, "model": str(model_path), "data": str(data),
+    meta = {"device": get_runtime(device).name, "model": shown_path(model_path),
+            "data": shown_path(data),
             "views": len(cameras), "repeats": repeats, "build": "exact" if exact else "fast",
             "limits": limits, "baseline": None if baseline is None else str(baseline),
             "config": f"{cfg.variant}, L_C={cfg.L_C}, L={cfg.L}, log2_T={cfg.log2_T}, "

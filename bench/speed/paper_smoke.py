@@ -1,7 +1,7 @@
 """The `paper` preset's smoke run: a few training steps of each method at the papers' sizes,
 bake, render one small view; the time and peak resident memory of every phase.
 
-    python -m bench.speed.paper_smoke --data /work/data/lego200 --out results/
+    python -m bench.speed.paper_smoke --data data/lego --out results/
 
 What it catches is what a GPU user's first `paper` run would die on (a shape, an
 allocation, an hour of set-up), at CPU cost. Each method that declares a ``paper_smoke``

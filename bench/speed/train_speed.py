@@ -4,8 +4,9 @@
     python -m bench.speed.train_speed --data DIR --steps 40 --engines torch,fast
 
 Each engine trains its own copy of the same initial model on the same data, one step of
-each in turn (``--warmup`` untimed steps, then ``--steps`` timed ones, from step 0, the
-lattice adapting its ray count to the preset's target samples). Per stage
+each in turn, the order swapped every step (``--warmup`` untimed steps, then ``--steps``
+timed ones, from step 0, the lattice adapting its ray count to the preset's target
+samples). Per stage
 (:mod:`clrender.ngprt.stages`: ray sampling, coarse corners and their de-duplication,
 auxiliary encoding + MLP, coarse trilinear, fine levels, fusion, compositing, shading,
 losses, each stage's backward, the optimiser; the occupancy updates timed per engine
@@ -14,7 +15,10 @@ median seconds over the timed steps, and a bound from the stage's counted gather
 this machine's rates measured in the same run (:mod:`bench.speed.limits`'s random-gather and
 FLOP rates on the OpenCL device, the same CPU; the streaming rate of a torch copy).
 "Samples" are the samples entering the loss (the preset's target batch);
-``samples_per_s`` = median samples over median step time. Writes
+``samples_per_s`` = median samples over median step time. Each engine's speed-up over the
+first (``speedup``: of a step's samples a second, and of its encoding stages' time) is the
+geometric mean over the timed steps, each step of both a pair, with its 95% interval
+(:func:`bench.tables.measure.speedup_interval`). Writes
 ``<out>/train_speed.{md,json}``. Never asserts; the ratios are only as good as the
 machine is quiet.
 """
@@ -31,8 +35,11 @@ import numpy as np
 import torch
 
 from bench.modelcache import cache
+from bench.options import shown_path
 from bench.speed.limits import F8_BYTES, flop_rate, gather_rate
 from bench.speed.ngprt_bounds import deferred_flops
+from bench.tables.compare import speedup_cell
+from bench.tables.measure import speedup_interval
 from clrender.atomic import write_atomic
 from clrender.data import load_dataset
 from clrender.ngprt import engine as engines
@@ -179,6 +186,22 @@ def summarise(t: _Trainer, occ_s: float) -> dict:
                                                              if s in bw)}
 
 
+def paired_speedups(base: _Trainer, t: _Trainer, occ: dict) -> dict:
+    """``t`` against ``base`` over their timed steps, step k of both a pair: {"step": of the
+    samples a second (the amortised occupancy seconds ``occ[name]`` added to each step),
+    "encoding": of the encoding stages' seconds}, each
+    :func:`bench.tables.measure.speedup_interval` (>1: ``t`` faster)."""
+    def rate(tr, st):
+        return st["samples"] / (st["total"] + occ[tr.name])
+
+    def encoding(st):
+        return sum(st["forward"].get(s, 0.0) + st["backward"].get(s, 0.0) for s in ENCODING)
+
+    pairs = list(zip(base.steps, t.steps))
+    return {"step": speedup_interval([rate(t, b) / rate(base, a) for a, b in pairs]),
+            "encoding": speedup_interval([encoding(a) / encoding(b) for a, b in pairs])}
+
+
 def markdown(res: dict, meta: dict) -> str:
     names = list(res)
     head = "| stage | " + " | ".join(f"{n} ms" for n in names) + " | bound ms | " + \
@@ -200,16 +223,17 @@ def markdown(res: dict, meta: dict) -> str:
                      + " |")
     lines.append("| occupancy (amortised) | " + " | ".join(
         f"{1e3 * res[n]['occupancy_s']:.1f}" for n in names) + " | | |" + " |" * (len(names) - 1))
-    lines += ["", "| engine | step ms | samples | samples/s | encoding ms | speed-up (step) | "
-              "speed-up (encoding) |", "|---|---|---|---|---|---|---|"]
-    base = res[names[0]]
+    lines += ["", f"| engine | step ms, median | samples | samples/s | encoding ms, median | "
+              f"speed-up vs {names[0]} (samples/s, 95%) | speed-up vs {names[0]} (encoding, "
+              "95%) |", "|---|---|---|---|---|---|---|"]
     for n in names:
-        r = res[n]
+        r, x = res[n], res[n].get("speedup") or {}
         lines.append(f"| {n} | {1e3 * r['step_s']:.1f} | {r['samples']:.0f} | "
                      f"{r['samples_per_s']:.0f} | {1e3 * r['encoding_s']:.1f} | "
-                     f"{r['samples_per_s'] / base['samples_per_s']:.2f}x | "
-                     f"{base['encoding_s'] / r['encoding_s']:.2f}x |")
-    return "\n".join(lines) + "\n"
+                     f"{speedup_cell(x.get('step'))} | {speedup_cell(x.get('encoding'))} |")
+    return "\n".join(lines + ["", "Speed-up: the geometric mean over the timed steps (each "
+                               "step of both engines a pair, the order swapped every step) "
+                               "with its 95% interval (t over the pairs' log ratios)."]) + "\n"
 
 
 def run(preset: str, data, steps: int, warmup: int, out: Path, names, variant: str = "separate-v",
@@ -221,11 +245,13 @@ def run(preset: str, data, steps: int, warmup: int, out: Path, names, variant: s
     build_s = fused.build() if "fast" in names else 0.0
     trainers = [_Trainer(n, cfg, tcfg, sampler, seed) for n in names]
     for i in range(warmup + steps):
-        for t in trainers:
+        for t in (trainers if i % 2 == 0 else trainers[::-1]):
             t.step(i, timed=i >= warmup)
     occ = {t.name: t.occupancy_seconds() for t in trainers}
     n_samples, n_corners = _corner_count(trainers[0].model, trainers[0])
     res = {t.name: summarise(t, occ[t.name]) for t in trainers}
+    for t in trainers[1:]:
+        res[t.name]["speedup"] = paired_speedups(trainers[0], t, occ)
     rates = measure_rates(trainers[0].model, n_corners)
     c = counts(trainers[0].model, res[names[0]]["samples"],
                n_corners * res[names[0]]["samples"] / max(1.0, n_samples),
@@ -233,7 +259,7 @@ def run(preset: str, data, steps: int, warmup: int, out: Path, names, variant: s
     bounds = {s: bound_s(c[s], rates) for s in c}
     bounds.update({f"{s} backward": bound_s(c[s], rates, True) for s in BACKWARD})
     meta = {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-            "preset": preset, "variant": variant, "L": L, "data": str(data), "steps": steps,
+            "preset": preset, "variant": variant, "L": L, "data": shown_path(data), "steps": steps,
             "warmup": warmup, "threads": torch.get_num_threads(), "rates": rates,
             "counts": c, "bounds_s": bounds, "fast_build_s": build_s,
             "unique_corners_per_sample": n_corners / max(1.0, n_samples)}

@@ -21,11 +21,16 @@ def _time(m) -> float:
 
 def speedup(m_row, m_against, row, against, size: str | None = None) -> dict:
     """{ratio: against's time over row's (>1: row faster)}, with ``lo``, ``hi``, ``n`` where
-    the row's result carries pairs against this very row (its baseline): the test size's
-    (``paired_speedup``), or at ``size`` ("WxH", ``paired_at``) where given."""
-    paired = m_row.paired_speedup if size is None else (m_row.paired_at or {}).get(size)
-    if paired is not None and row.baseline == against.name:
-        return {k: paired[k] for k in ("ratio", "lo", "hi", "n")}
+    the row's result carries pairs against this very row: against its baseline the test
+    size's (``paired_speedup``), or at ``size`` ("WxH", ``paired_at``) where given; against
+    another row the test size's (``paired_with``, ``size`` "test"); without pairs, the
+    ratio of the two rows' median times (a result of an older run)."""
+    if row.baseline == against.name:
+        paired = m_row.paired_speedup if size is None else (m_row.paired_at or {}).get(size)
+    else:
+        paired, size = (m_row.paired_with or {}).get(against.name), None
+    if paired is not None:
+        return {k: paired[k] for k in ("ratio", "lo", "hi", "n")} | {"size": size}
     return {"ratio": _time(m_against) / _time(m_row)}
 
 
@@ -70,7 +75,7 @@ def measure(table, results: list) -> list[dict]:
                        if verdict == "underpowered" else None)
         t_row, t_against = row.paper.get("Time (ms)"), against.paper.get("Time (ms)")
         rec["speedup"] = speedup(m, b, row, against, table.verdict_size)
-        rec["speed_size"] = table.verdict_size
+        rec["speed_size"] = rec["speedup"].pop("size", None)
         rec["speedup_paper"] = None if t_row is None or t_against is None else t_against / t_row
         rec["speed_verdict"] = speed_verdict(rec["speedup"], rec["speedup_paper"])
         rec["counts"] = count_claims(row, m, against, b)

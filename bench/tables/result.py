@@ -29,6 +29,8 @@ class RowResult:
             size (:func:`bench.tables.measure.time_pairs`): {ratio, lo, hi (95% interval), n,
             stage, size, ms_row, ms_baseline}; None without a baseline.
         paired_at: {"WxH": the same} at the table's ``paired_sizes``.
+        paired_with: {row name: the same at the test size} against each row a comparison of
+            the table sets this row against, other than its baseline.
         same_image: for a table whose rows must render their baseline's image
             (``same_image``): {identical, max_diff, views}; else None.
     """
@@ -50,6 +52,7 @@ class RowResult:
     per_seed: list | None = None
     paired_speedup: dict | None = None
     paired_at: dict = field(default_factory=dict)
+    paired_with: dict = field(default_factory=dict)
     same_image: dict | None = None
 
     def of_model(self, train_minutes: float, model_key: str) -> "RowResult":
@@ -64,4 +67,5 @@ class RowResult:
                 "size_MB": self.size_MB, "time_note": self.time_note,
                 "train_minutes": self.train_minutes, "model_key": self.model_key,
                 "paired_speedup": self.paired_speedup, "paired_at": self.paired_at,
+                "paired_with": self.paired_with,
                 "same_image": self.same_image}

@@ -48,6 +48,9 @@ def aggregate(per_seed: list[RowResult], seeds: list[int]) -> RowResult:
     means["paired_speedup"] = pooled_pairs([m.paired_speedup for m in per_seed])
     means["paired_at"] = {size: pooled_pairs([(m.paired_at or {}).get(size) for m in per_seed])
                           for size in per_seed[0].paired_at or {}}
+    means["paired_with"] = {name: pooled_pairs([(m.paired_with or {}).get(name)
+                                                for m in per_seed])
+                            for name in per_seed[0].paired_with or {}}
     return RowResult(**means, seeds=list(seeds),
                      per_seed=[replace(m, sample=None) for m in per_seed])
 

@@ -4,19 +4,20 @@ the paper's, the verdict) from the tables' JSON (``results/<key>.json`` or the c
 copy into a README between two markers.
 
 Examples:
-    >>> text = summary(Path("docs/results"), dated=False)   # the README's: no dates
-    >>> copy_into(Path("README.md"), text)      # between <!-- results:begin/end -->
+    >>> text = summary(Path("results"))                     # results/README.md's
+    >>> copy_into(Path("README.md"), readme_summary(Path("docs/results")))
 """
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-from bench.tables import ablation, compare
+from bench.tables import ablation, command, compare, markdown
 from clrender.atomic import write_atomic
 
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
-KEYS = ["title", "rows", "comparisons", "preset", "scene", "device", "date", "git_revision"]
+KEYS = ["title", "rows", "comparisons", "preset", "scene", "device", "date", "git_revision",
+        "argv"]
 
 
 def _ours(rec: dict) -> str:
@@ -26,13 +27,14 @@ def _ours(rec: dict) -> str:
     return f"{rec['mean']:+.2f} ± {rec['std']:.2f} [{rec['lo']:+.2f}, {rec['hi']:+.2f}]"
 
 
-def run_line(data: dict, dated: bool = True) -> str:
-    """Where and how a table was run: seeds, preset, scene, device and (``dated``) its date
-    and git revision."""
+def run_line(data: dict) -> str:
+    """Where and how a table was run: seeds, preset, scene, device, its date and git
+    revision (marked where made from uncommitted changes), then its ``bench.run``
+    command."""
     n = len(data["rows"][0].get("seeds") or [None])
     line = (f"{n} seed{'s' if n > 1 else ''}, `{data['preset']}` preset, {data['scene']} "
-            f"scene, {data['device']}")
-    return line + (f", {data['date']}, git {data['git_revision']}." if dated else ".")
+            f"scene, {data['device']}, {data['date']}, {markdown.revision(data)}.")
+    return line + f" `{command.lines(data)[-1]}`"
 
 
 def _speedup(data: dict, rec: dict) -> str:
@@ -47,10 +49,10 @@ def _speedup(data: dict, rec: dict) -> str:
                         if s and size != judged])
 
 
-def table_summary(data: dict, dated: bool = True) -> list[str]:
+def table_summary(data: dict) -> list[str]:
     """Markdown lines of one table's summary from its JSON ``data`` (a column of counts
-    where a claim has some); ``dated``: :func:`run_line`'s date and revision."""
-    lines = [f"### {data['title']}", "", run_line(data, dated), ""]
+    where a claim has some)."""
+    lines = [f"### {markdown.title(data)}", "", run_line(data), ""]
     if not data["comparisons"]:
         return lines + ["No comparisons.", ""]
     counts = any(r.get("counts") for r in data["comparisons"])
@@ -58,14 +60,43 @@ def table_summary(data: dict, dated: bool = True) -> list[str]:
             "Speed-up paper"] + (["Counts ours (paper): verdict"] if counts else []) + ["Verdict"]
     lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in data["comparisons"]:
-        claim = f"{r['row']} − {r['against']}" + (
-            f" (equivalent within ±{r['margin']:.2f} dB)" if r["claim"] == "equivalent" else "")
         lines.append("| " + " | ".join([
-            claim, _ours(r), "" if r["paper"] is None else f"{r['paper']:+.2f}",
+            _claim(r), _ours(r), "" if r["paper"] is None else f"{r['paper']:+.2f}",
             _speedup(data, r),
             "" if r["speedup_paper"] is None else f"{r['speedup_paper']:.2f}x"]
             + ([compare.counts_cell(r)] if counts else []) + [compare.verdict_cell(r)]) + " |")
     return lines + [""]
+
+
+def readme_summary(out_dir: Path) -> str:
+    """The README's summary: one Markdown table of every claim of every table in
+    ``out_dir``, each table named on its first claim (no dates, commands or counts: the
+    results page holds them)."""
+    head = ["Table", "Claim", "ΔPSNR ours (dB, interval)", "ΔPSNR paper", "Speed-up ours",
+            "Speed-up paper", "Verdict"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    tables = load(out_dir)
+    for _, data in tables:
+        for i, r in enumerate(data["comparisons"]):
+            lines.append("| " + " | ".join([
+                _named(data) if i == 0 else "", _claim(r), _ours(r),
+                "" if r["paper"] is None else f"{r['paper']:+.2f}", _speedup(data, r),
+                "" if r["speedup_paper"] is None else f"{r['speedup_paper']:.2f}x",
+                compare.verdict_cell(r)]) + " |")
+    if not tables:
+        return f"No table has been run into {out_dir}/ yet.\n"
+    return "\n".join(lines) + "\n"
+
+
+def _named(data: dict) -> str:
+    """A table's title, marked where its run was made from uncommitted changes."""
+    return markdown.title(data) + (" (**uncommitted changes**)" if command.is_dirty(data)
+                                   else "")
+
+
+def _claim(r: dict) -> str:
+    return f"{r['row']} − {r['against']}" + (
+        f" (equivalent within ±{r['margin']:.2f} dB)" if r["claim"] == "equivalent" else "")
 
 
 def read(path: Path) -> dict:
@@ -93,18 +124,17 @@ def load(out_dir: Path) -> list[tuple[str, dict]]:
     return found
 
 
-def summary(out_dir: Path, dated: bool = True) -> str:
-    """The summary of every table in ``out_dir`` (Markdown; a line saying so when none).
-    ``dated``: each run's date and git revision, then the verdicts' rule
-    (:data:`bench.tables.compare.NOTE`); the README's summary has neither (both are in
-    docs/results.md)."""
+def summary(out_dir: Path) -> str:
+    """The summary of every table in ``out_dir`` (Markdown; a line saying so when none):
+    each run's conditions, its claims, then the verdicts' rule
+    (:data:`bench.tables.compare.NOTE`)."""
     tables = load(out_dir)
     lines = []
     for _, data in tables:
-        lines += table_summary(data, dated)
+        lines += table_summary(data)
     if not tables:
         lines = [f"No table has been run into {out_dir}/ yet.", ""]
-    return "\n".join(lines + ([compare.NOTE, ""] if dated else []))
+    return "\n".join(lines + [compare.NOTE, ""])
 
 
 def replace_between(old: str, begin: str, end: str, text: str, where) -> str:

@@ -1,13 +1,13 @@
 #!/bin/bash
-# One prepared session on a lent GPU machine that reaches no package registry (docs/gpu.md).
+# A GPU machine without a package registry, checked in one run (docs/guides/devices.md).
 #
-#   bash bench/tools/device_session.sh prepare [BONSAI_DIR [NDRF_STUDENT LEGO_DIR]]   # here
-#   bash bench/tools/device_session.sh run      # there, as root, with .gpu carried
+#   bash bench/tools/device_session.sh prepare [BONSAI_DIR [NDRF_STUDENT LEGO_DIR]]   # on a connected machine
+#   bash bench/tools/device_session.sh run      # on the GPU machine, as root, with .gpu/ copied beside the tree
 #
-# prepare: fills .gpu/ (git-ignored; at most 60 MiB, the machine takes 64): Python 3.12
-# wheels of what the GPU image lacks, device_check's reference images (made here with
-# PoCL), the bonsai LLFF folder (bench.tools.public_scenes) and, given, a baked NDRF
-# student with its dataset's first 5 test frames (lego's transforms_test.json, cut).
+# prepare: fills .gpu/ (git-ignored, at most 60 MiB): Python 3.12 wheels of what the GPU
+# image lacks, device_check's reference images (made with PoCL), the bonsai LLFF folder
+# (bench.tools.public_scenes) and, given, a baked NDRF student with its dataset's first 5
+# test frames (lego's transforms_test.json, cut).
 # run: registers the vendor's OpenCL driver (/etc/OpenCL/vendors), makes clrender
 # importable from the tree (its entry points, kernels/ as clrender.kernels), then
 # device_check, the kernel = reference tests on the GPU's platform (the GPU variants

@@ -23,7 +23,7 @@ Licences: Mip-NeRF 360 and NeRF-synthetic are research datasets released by thei
 authors; these repositories are third-party copies (shouxieai/nerf says MIT for its code,
 the others state none), so use the folders for research measurements only, and cite the
 original datasets. Nothing in the tests depends on them. Sources, conditions and the
-results on them: docs/real-scenes.md.
+results on them: docs/guides/public-scenes.md.
 
 Files are copied, never linked; the folder is built beside ``out`` and renamed into place,
 so a failure leaves no half-written dataset.
@@ -43,6 +43,42 @@ from clrender.data.llff import split_indices
 
 BONSAI_FRAMES = 292
 LEGO_FRAMES = 100
+BONSAI_HWF = (2078.0, 3118.0, 3222.7)      # poses_bounds.npy's height, width, focal (px)
+LEGO_FOV = 0.6911112070083618              # transforms_*.json's camera_angle_x (rad)
+SOURCES = {"bonsai": ("https://github.com/EricXu23/Bonsaidownload",
+                      "https://github.com/FunnyPocketBook/sfm-ooi-extract"),
+           "lego": ("https://github.com/shouxieai/nerf",)}
+
+
+def commands(name: str, out: str) -> list[str]:
+    """The lines that assemble the public scene ``name`` into the folder ``out``: its
+    clones, then this module."""
+    repos = [url.rsplit("/", 1)[1] for url in SOURCES[name]]
+    return ([f"git clone {url}" for url in SOURCES[name]]
+            + [f"python -m bench.tools.public_scenes {name} {' '.join(repos)} {out}"])
+
+
+def identify(folder: Path) -> str | None:
+    """The public scene a dataset folder holds, as :func:`main` writes it ("bonsai",
+    "lego"), by its cameras and frame counts; None for any other folder."""
+    folder = Path(folder)
+    poses = folder / "poses_bounds.npy"
+    if poses.is_file():
+        p = np.load(poses, allow_pickle=False)
+        if p.shape == (BONSAI_FRAMES, 17) and np.allclose(
+                p[0, :15].reshape(3, 5)[:, 4], BONSAI_HWF, atol=0.1):
+            return "bonsai"
+        return None
+    counts, fovs = {}, set()
+    for split in ("train", "test"):
+        file = folder / f"transforms_{split}.json"
+        if not file.is_file():
+            return None
+        meta = json.loads(file.read_text())
+        counts[split], fovs = len(meta.get("frames", [])), fovs | {meta.get("camera_angle_x")}
+    lego = split_indices(LEGO_FRAMES, "train"), split_indices(LEGO_FRAMES, "test")
+    return "lego" if (counts == {"train": len(lego[0]), "test": len(lego[1])}
+                      and fovs == {LEGO_FOV}) else None
 
 
 def bonsai_images(repo: Path) -> list[Path]:

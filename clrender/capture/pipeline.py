@@ -143,7 +143,7 @@ def choose_mapper(mapper: str, silhouettes: bool) -> str:
     """The mapper to run: ``mapper``, or for "auto" incremental when the capture has
     silhouettes (an object on a transparent background), global otherwise.
 
-    Measured (docs/capture.md): incremental mapping drifts round an orbit (bonsai, 100
+    Measured (docs/results-capture.md): incremental mapping drifts round an orbit (bonsai, 100
     photos: rotations 1.6 degrees off at the median, out of the 1-degree bound) where
     global mapping does not (0.40 at the median, 0.63 at most); on an object with
     repeated structure both turn a few cameras (lego: 6 incremental, 10 global), which

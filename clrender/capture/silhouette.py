@@ -21,7 +21,7 @@ Examples:
 
 References: Heinly et al. 2014, "Correcting for Duplicate Scene Structure in Sparse 3D
 Reconstruction" (ECCV), on the repeated-structure failure; measured on lego in
-docs/capture.md.
+docs/guides/capture.md.
 """
 from __future__ import annotations
 

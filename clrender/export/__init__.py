@@ -1,5 +1,5 @@
 """``clrender export``: a baked model as a static WebGL2 page that renders it as the OpenCL
-renderer does (docs/browser.md).
+renderer does (docs/explanation/browser.md).
 
 Examples:
     >>> export("ndrf.npz", "site/", data="data/lego")   # index.html, model.json, *.bin

@@ -29,6 +29,9 @@ COLOUR_SOURCES = ("renders", "images")
 MAX_VIEWS = 60             # views a fit uses at most (evenly spaced over the training views)
 AROUND_VIEWS, AROUND_SIZE = 60, 400      # views round a bounded scene without a dataset
 MESH_NAMES = ("outer", "inner")
+# NGP-RT's surface: the alpha level where one base step of a ray loses 30% of its light
+# (NDRF's inner level, 0.01, lies well outside the visible surface of a soft density).
+SURFACE_ALPHA = 0.3
 
 
 def scene_meshes(model, threshold: float | None = None, extraction: str = "cpu",
@@ -36,7 +39,7 @@ def scene_meshes(model, threshold: float | None = None, extraction: str = "cpu",
     """[(name, (V, 3) vertices, (F, 3) faces)] of a loaded model, outer first.
 
     Args:
-        threshold: NGP-RT: the alpha level of the surface (default NDRF's inner one);
+        threshold: NGP-RT: the alpha level of the surface (default :data:`SURFACE_ALPHA`);
             NDRF files keep their meshes (a threshold is an error).
         extraction: NGP-RT: the extraction preset (density grid, face budget).
         cameras: NGP-RT: training cameras; faces none of them sees are culled.
@@ -47,10 +50,9 @@ def scene_meshes(model, threshold: float | None = None, extraction: str = "cpu",
         K = model.config.K
         names = MESH_NAMES if K == 2 else [f"mesh_{k}" for k in range(K)]
         return [(names[k], *model.mesh(k)[:2]) for k in range(K)]
-    from ..ndrf.config import NDRFConfig
     from ..ndrf.mesh import extract_duplex, teacher_density
 
-    level = NDRFConfig().thresholds[-1] if threshold is None else float(threshold)
+    level = SURFACE_ALPHA if threshold is None else float(threshold)
     if not 0.0 < level < 1.0:
         raise ValueError(f"--threshold {level}: an alpha level in (0, 1) is expected")
     meshes, _ = extract_duplex(teacher_density(model, inner_box=True), extraction,

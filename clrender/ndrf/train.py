@@ -89,12 +89,12 @@ class TrainConfig:
 
 
 # Short runs take ten times larger steps, decaying over the same two decades (why:
-# docs/training.md, "NDRF training").
+# docs/guides/training.md, "NDRF training").
 TRAIN_PRESETS: dict[str, TrainConfig] = {
     "paper": TrainConfig(),
     # Full 200x200 frames, a duplex run in minutes on 2 CPU cores; 60k faces per mesh, as
     # good as more at this resolution and step count for less time a step
-    # (docs/training.md, "NDRF training"). Larger captures (lego at 800x800) shade a random
+    # (docs/guides/training.md, "NDRF training"). Larger captures (lego at 800x800) shade a random
     # 200x200 window a step, the paper's "local patches", at the same cost a step.
     "cpu": TrainConfig(iterations=5000, n_distill=200, patch=200, lr=1e-2, lr_final=1e-4,
                        extract="cpu", face_budget=60_000, checkpoint_every=500, log_every=25),

@@ -256,7 +256,7 @@ def _size_problems(c: ModelConfig) -> list[str]:
 # (fast engine). The step is what a short run's quality turns on: L_C = 128 with
 # step_res = 2 L_C gives s0 = 0.0135, fine enough for the built-in scene's fine texture
 # and thin twigs, which a coarser step blurs. G_res = L_C / 2, as the paper's. Measured:
-# docs/training.md, "Presets".
+# docs/guides/training.md, "Presets".
 _CPU = ModelConfig(L_C=128, step_res=256, log2_T=18, G_res=64, aux_levels=4, aux_log2_T=17)
 PRESETS: dict[str, ModelConfig] = {
     # The paper's sizes (S2.1, S2.5).
@@ -265,9 +265,9 @@ PRESETS: dict[str, ModelConfig] = {
     # cpu-long: real captures, about ten minutes of training on 2 CPU cores (fast engine).
     # The cpu model with 2^19-entry fine tables, chosen at equal minutes against the cpu
     # sizes and L_C = 256, whose costlier steps (a 256^3 occupancy update, twice the
-    # samples a ray) fit fewer into the time (docs/training.md, "Choosing cpu-long").
+    # samples a ray) fit fewer into the time (docs/results-training.md, "Presets at equal minutes").
     # Larger tables were not tried: gathers from tables beyond the last-level cache are
-    # several times slower (docs/vendors.md, "PoCL facts the kernels rely on").
+    # several times slower (docs/explanation/opencl.md, "PoCL facts the kernels rely on").
     "cpu-long": replace(_CPU, log2_T=19),
     # For tests: trains in well under a minute.
     "tiny": ModelConfig(L_C=32, log2_T=14, G_res=16, aux_levels=3, aux_log2_T=14),

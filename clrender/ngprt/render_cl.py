@@ -102,7 +102,7 @@ def lane_width(device, cap: int = 16) -> int:
     SIMD lanes). Not a CPU's preferred width: Intel's CPU runtime reports 1 there (it
     vectorises across work-items), yet with the kernels' lanes declared by
     ``vec_type_hint`` it keeps them and marches faster at 16 lanes than at 1
-    (docs/vendors.md, "Each kernel in its own lanes on both")."""
+    (docs/explanation/opencl.md, "Each kernel in its own lanes on both")."""
     width = int(device.native_vector_width_float if device_type_name(device) == "CPU"
                 else device.preferred_vector_width_float)
     width = max(1, width)

@@ -85,7 +85,7 @@ class TrainConfig:
 # decay per step of an update every 32 steps with decay 0.6.
 # 2^15 samples a batch: the cpu model's step (step_res = 2 L_C) puts ~30 on a bounded
 # ray, so a batch holds ~2700 rays; half as many rays a batch lost quality
-# (docs/training.md, "Presets").
+# (docs/guides/training.md, "Presets").
 _CPU = TrainConfig(iterations=1000, max_rays=4096, target_samples=1 << 15, occ_every=64,
                    occ_warmup=128, occ_decay=0.36, occ_fraction=0.25, checkpoint_every=250,
                    log_every=25)
@@ -93,7 +93,7 @@ TRAIN_PRESETS: dict[str, TrainConfig] = {
     "paper": TrainConfig(),
     "cpu": _CPU,
     # The cpu counts for about ten minutes of fast-engine steps on a real capture
-    # (docs/training.md, "Presets": the time a step on the lego and the bonsai).
+    # (docs/guides/training.md, "Presets": the time a step on the lego and the bonsai).
     "cpu-long": replace(_CPU, iterations=9000, checkpoint_every=1000, log_every=50),
     "tiny": TrainConfig(iterations=300, max_rays=1024, target_samples=1 << 13, occ_every=16,
                         occ_warmup=32, occ_decay=0.6, occ_fraction=0.5, checkpoint_every=300,
@@ -313,7 +313,7 @@ def train(data, out, preset: str = "cpu", variant: str = "separate-v", L: int = 
 def make_optimizer(model: NGPRT, tcfg: TrainConfig) -> torch.optim.Adam:
     """Adam over every parameter (S2.4); on the CPU torch's fused Adam, the same update in
     one pass, several times faster than the default, the parameters equal to the default's
-    within rounding (docs/training.md, "Adam")."""
+    within rounding (docs/results-training.md, "The training engines")."""
     cpu = all(p.device.type == "cpu" for p in model.parameters())
     return torch.optim.Adam(model.parameters(), lr=tcfg.lr, betas=tuple(tcfg.betas),
                             eps=tcfg.eps, fused=True if cpu else None)

@@ -1,6 +1,6 @@
 // The exported page: loads model.json and its assets, builds the method's renderer, and
 // gives orbit / pan / zoom, a resolution control, the dataset's cameras and ms a frame.
-// window.clrender is the hook tests and benchmarks drive (docs/browser.md).
+// window.clrender is the hook tests and benchmarks drive (docs/explanation/browser.md).
 import * as G from "./gl.js";
 import {NDRF} from "./ndrf.js";
 

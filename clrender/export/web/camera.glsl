@@ -1,6 +1,6 @@
 // The camera of clrender.Camera and kernels/camera.h: ray (a, b, -1) of a pixel centre in
 // camera space, its unit world direction; the same float operations in the same order
-// (GLSL ES may contract a * b + c and round division differently: docs/browser.md).
+// (GLSL ES may contract a * b + c and round division differently: docs/explanation/browser.md).
 precision highp float;
 precision highp int;
 precision highp sampler2D;

@@ -1,4 +1,4 @@
-// NDRF in WebGL2 (docs/ndrf.md, docs/browser.md): per mesh the screen buffer by
+// NDRF in WebGL2 (docs/ndrf.md, docs/explanation/browser.md): per mesh the screen buffer by
 // rasterisation into three float layers (features 0-3, 4-7, hit position), conv0 as
 // full-screen passes of NV float targets, conv1 with sigmoid and compositing into a float
 // frame.

@@ -1,4 +1,4 @@
-// NGP-RT in WebGL2 (docs/ngprt.md, docs/browser.md): one full-screen pass marches every
+// NGP-RT in WebGL2 (docs/ngprt.md, docs/explanation/browser.md): one full-screen pass marches every
 // pixel's ray (ngprt_march.frag) into a float frame.
 import * as G from "./gl.js";
 

@@ -2,7 +2,7 @@
 // (and, bounded, the closed-form skip with G), Eq. 6-8 features of every fusion variant,
 // compositing, the deferred MLP, the background. The float32 operations of
 // clrender/ngprt/render_ref.py in its order; GLSL ES may contract a * b + c and round
-// division differently (docs/browser.md says what that changes).
+// division differently (docs/explanation/browser.md says what that changes).
 // Defines (clrender/export/ngprt.py): L_C OCC_RES LEVELS T_SIZE G_RES CB CC CT N_ATT VARIANT
 // UNBOUNDED HIDDEN FHIDDEN T_STOP SH_C0..10 VARIANT_* O_* (texel offsets in `mlp`).
 uniform highp usampler3D occ0, occ1, occ2, occ3, occ4, gridG;
