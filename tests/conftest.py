@@ -8,6 +8,10 @@ from pathlib import Path
 
 import pytest
 
+# The suite's trained models, trained once per run (tests/trained_models.py).
+from trained_models import (bench_cache, tiny_ndrf_student, tiny_run, tiny_scene,  # noqa: F401
+                            tiny_teacher)
+
 TESTS = Path(__file__).resolve().parent
 
 
@@ -82,21 +86,3 @@ def one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
-
-
-@pytest.fixture(scope="session")
-def tiny_ndrf_student(tmp_path_factory):
-    """A `tiny` NDRF student of the built-in bounded scene (40x40 pixels) and its `tiny`
-    NGP-RT teacher, trained once per session: {"scene", "teacher", "student"} paths."""
-    from clrender.data import make_scene
-    from clrender.ndrf.train import bake_run, train
-    from clrender.ngprt.bake import bake_run as bake_teacher
-    from clrender.ngprt.train import train as train_teacher
-
-    root = tmp_path_factory.mktemp("tiny_ndrf")
-    scene = make_scene("bounded", root / "scene", seed=1, n_train=12, n_test=2,
-                       width=40, height=40)
-    teacher = bake_teacher(train_teacher(scene, root / "teacher", preset="tiny",
-                                         progress=False), root / "teacher.npz")
-    run = train(scene, root / "run", teacher=teacher, preset="tiny", progress=False)
-    return {"scene": scene, "teacher": teacher, "student": bake_run(run, root / "ndrf.npz")}

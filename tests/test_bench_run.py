@@ -1,11 +1,13 @@
-"""`python -m bench.run` end to end (slow): a small built-in scene, the `tiny` preset.
+"""`python -m bench.run` end to end (slow): the suite's small built-in scene, the `tiny`
+preset, the suite's bench cache (tests/trained_models.py; its L=2 model is the suite's
+shared NGP-RT model, trained by whichever asks first).
 
-Trains the three models of Table 4 once, renders each with the three marches, and checks
-what the table must show whatever the figures: one model per L shared by its three rows,
-the marches changing the marching points and reads only (same occupied points, images
-identical bit for bit, checked by the harness), each row with G timed against the paper's
-w/o G row as interleaved pairs at the test size and at 1920x1080, and a cached second run
-that trains nothing.
+Trains the models of Table 4 the cache lacks once, renders each with the three marches,
+and checks what the table must show whatever the figures: one model per L shared by its
+three rows, the marches changing the marching points and reads only (same occupied points,
+images identical bit for bit, checked by the harness), each row with G timed against the
+paper's w/o G row as interleaved pairs at the test size and at 1920x1080, and a cached
+second run that trains nothing.
 """
 from __future__ import annotations
 
@@ -16,20 +18,13 @@ import pytest
 
 from bench import run
 from bench.tables.result import RowResult
-from clrender.data import make_scene
 from clrender.evaluate import evaluate
 
 
-@pytest.fixture(scope="module")
-def small_scene(tmp_path_factory):
-    return make_scene("bounded", tmp_path_factory.mktemp("scene"), seed=1, n_train=12,
-                      n_test=2, width=40, height=40)
-
-
 @pytest.mark.slow
-def test_table4_end_to_end(small_scene, tmp_path, capsys):
-    args = ["table4", "--preset", "tiny", "--scene", str(small_scene), "--cache",
-            str(tmp_path / "cache"), "--out", str(tmp_path / "out"), "--repeats", "1"]
+def test_table4_end_to_end(tiny_scene, bench_cache, tmp_path, capsys):
+    args = ["table4", "--preset", "tiny", "--scene", str(tiny_scene), "--cache",
+            str(bench_cache), "--out", str(tmp_path / "out"), "--repeats", "1"]
     assert run.main(args) == 0
     data = json.loads((tmp_path / "out" / "table4.json").read_text())
     rows = data["rows"]
@@ -53,7 +48,7 @@ def test_table4_end_to_end(small_scene, tmp_path, capsys):
                 assert 0 < pair["lo"] <= pair["ratio"] <= pair["hi"]
         # The centre metric's row: the same run baked again beside the model, its images
         # compared (not required to match: its steps may pass an occupied point).
-        folder = tmp_path / "cache" / "models" / centre["model_key"]
+        folder = bench_cache / "models" / centre["model_key"]
         assert (folder / "model-G_metric=centre.npz").is_file()
         assert centre["same_image"]["views"] == 2
         # Ours visits no more points than the paper's w/o G and reads one code a point.
@@ -61,14 +56,14 @@ def test_table4_end_to_end(small_scene, tmp_path, capsys):
         assert ours["Skip reads"] == pytest.approx(ours["Marching"])
         assert base["Skip reads"] > base["Marching"]
         # The table's quality is `clrender eval`'s on the cached model (one scoring loop).
-        baked = tmp_path / "cache" / "models" / ours["model_key"] / "model.npz"
-        assert ours["PSNR"] == pytest.approx(evaluate(baked, small_scene)["mean"]["psnr"],
+        baked = bench_cache / "models" / ours["model_key"] / "model.npz"
+        assert ours["PSNR"] == pytest.approx(evaluate(baked, tiny_scene)["mean"]["psnr"],
                                              abs=1e-9)
     assert len({r["model_key"] for r in rows}) == 3
     md = (tmp_path / "out" / "table4.md").read_text()
     same_centre = sum(r["same_image"]["identical"] for r in rows[2::4])
     assert "| L=4 ours |" in md and md.count("| identical |") == 6 + same_centre
-    models = sorted((tmp_path / "cache" / "models").iterdir())
+    models = sorted(bench_cache / "models" / key for key in {r["model_key"] for r in rows})
     stamps = [(m / name).stat().st_mtime_ns for m in models
               for name in ("model.npz", "model-G_metric=centre.npz")]
     assert run.main(args) == 0                  # cached: nothing retrained or rebaked

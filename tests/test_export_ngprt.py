@@ -56,18 +56,23 @@ def test_ngprt_page_matches_opencl_on_random_models(browser, tmp_path, scene, va
 
 @pytest.mark.slow
 @pytest.mark.parametrize("scene", ["bounded", "unbounded"])
-def test_ngprt_page_matches_opencl_on_trained_models(browser, tmp_path, scene):
-    """`tiny` models trained briefly on the built-in scenes, their test views."""
+def test_ngprt_page_matches_opencl_on_trained_models(browser, tmp_path, scene, request):
+    """`tiny` models of the built-in scenes, their test views: bounded, the suite's shared
+    NGP-RT teacher (tests/trained_models.py); unbounded, one trained here briefly."""
     from clrender.data import make_scene
     from clrender.data.load import scan_dataset
     from clrender.ngprt.bake import bake_run
     from clrender.ngprt.train import train
 
-    data = make_scene(scene, tmp_path / "scene", seed=0, n_train=12, n_test=2, width=40,
-                      height=40)
-    run = train(data, tmp_path / "run", preset="tiny", iterations=200, seed=0, device="cpu",
-                progress=False)
-    path = bake_run(run, tmp_path / "model.npz")
+    if scene == "bounded":
+        shared = request.getfixturevalue("tiny_teacher")
+        data, path = shared["data"], shared["baked"]
+    else:
+        data = make_scene(scene, tmp_path / "scene", seed=0, n_train=12, n_test=2, width=40,
+                          height=40)
+        run = train(data, tmp_path / "run", preset="tiny", iterations=200, seed=0,
+                    device="cpu", progress=False)
+        path = bake_run(run, tmp_path / "model.npz")
     assert_page_matches(browser, tmp_path, path, scan_dataset(data, "test").final_cameras())
 
 

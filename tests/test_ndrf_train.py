@@ -484,26 +484,20 @@ def test_disk_backed_training_equals_in_memory(tmp_path, small_run_inputs, monke
 
 
 @pytest.mark.slow
-def test_tiny_end_to_end(tmp_path):
-    from clrender.data import load_dataset, make_scene
+def test_tiny_end_to_end(tiny_ndrf_student):
+    """The suite's shared `tiny` student (tests/trained_models.py): trained from the shared
+    NGP-RT teacher (meshes extracted, views distilled), baked, evaluated."""
+    from clrender.data import load_dataset
     from clrender.evaluate import evaluate
     from clrender.metrics import psnr
-    from clrender.ngprt.bake import bake_run as bake_teacher
-    from clrender.ngprt.train import train as train_teacher
     from clrender.ndrf.baked import load_baked
-    from clrender.ndrf.train import bake_run, train
 
-    scene = make_scene("bounded", tmp_path / "scene", seed=1, n_train=12, n_test=2,
-                       width=40, height=40)
-    teacher = bake_teacher(train_teacher(scene, tmp_path / "teacher", preset="tiny",
-                                         progress=False), tmp_path / "teacher.npz")
-    run = train(scene, tmp_path / "run", teacher=teacher, preset="tiny", progress=False)
+    scene, run, baked = (tiny_ndrf_student[k] for k in ("scene", "run", "student"))
     conf = json.loads((run / "config.json").read_text())
     assert conf["method"] == "ndrf"
     assert (run / "meshes" / "report.json").is_file() and (run / "distill.npz").is_file()
     log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
     assert {e["phase"] for e in log} == {"distill", "train"}
-    baked = bake_run(run, tmp_path / "ndrf.npz")
     model = load_baked(baked)
     assert model.config.K == 2
     result = evaluate(baked, scene)
