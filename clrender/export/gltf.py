@@ -50,6 +50,8 @@ def scene_meshes(model, threshold: float | None = None, extraction: str = "cpu",
         K = model.config.K
         names = MESH_NAMES if K == 2 else [f"mesh_{k}" for k in range(K)]
         return [(names[k], *model.mesh(k)[:2]) for k in range(K)]
+    if model.method != "ngprt":
+        raise ValueError(f"method {model.method!r} has no mesh to export (ndrf, ngprt)")
     from ..ndrf.mesh import extract_duplex, teacher_density
 
     level = SURFACE_ALPHA if threshold is None else float(threshold)
