@@ -105,3 +105,35 @@ def test_the_core_says_its_version(core_python, device_spec):
 
     done = run_core(core_python, ["-m", "clrender.cli", "--version"], device_spec)
     assert done.returncode == 0 and done.stdout == f"clrender {metadata.version('clrender')}\n"
+
+
+def test_each_extras_modules_come_from_its_pyproject_extra():
+    """clrender.extras.EXTRAS (what a command checks) against pyproject.toml's extras (what
+    pip installs), an extra's included extras expanded."""
+    import re
+    from importlib import metadata
+
+    try:
+        import tomllib
+    except ModuleNotFoundError:                 # Python 3.10: the bench extra's tomli
+        import tomli as tomllib
+
+    declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"]
+
+    def dists(extra: str) -> set[str]:
+        out = set()
+        for req in declared[extra]:
+            name = re.match(r"[A-Za-z0-9_.\-]+(\[[^\]]*\])?", req)
+            if name.group(1) and name.group(0).startswith("clrender"):
+                for included in name.group(1)[1:-1].split(","):
+                    out |= dists(included.strip())
+            else:
+                out.add(re.sub(r"[-_.]+", "-", name.group(0)).lower())
+        return out
+
+    by_module = metadata.packages_distributions()
+    for extra, modules in extras.EXTRAS.items():
+        for module in modules:
+            provided = {re.sub(r"[-_.]+", "-", d).lower() for d in by_module[module]}
+            assert provided & dists(extra), (extra, module, provided)
