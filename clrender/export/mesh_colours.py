@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import sparse
+from scipy.sparse.csgraph import laplacian
 from scipy.sparse.linalg import cg
 
 SMOOTHNESS = 1e-2          # lam: the edge term's weight against the mean pixel weight a
@@ -64,8 +65,7 @@ def fit_vertex_colours(vertices: np.ndarray, faces: np.ndarray, cameras, images,
         j = np.tile(corners, (1, 3)).reshape(-1)
         gram = gram + sparse.csr_matrix(
             ((w[:, :, None] * w[:, None, :]).reshape(-1), (i, j)), shape=(V, V))
-        for k in range(3):
-            rhs += _scatter(corners[:, k], w[:, k:k + 1] * y, V)
+        rhs += _scatter(corners.reshape(-1), (w[:, :, None] * y[:, None, :]).reshape(-1, 3), V)
     weight = np.asarray(gram.sum(axis=1)).ravel()      # each vertex's summed pixel weight
     seen = weight > 0
     if not seen.any():
@@ -93,8 +93,7 @@ def _edge_laplacian(faces: np.ndarray, V: int) -> sparse.csr_matrix:
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), 1)
     edges = np.unique(edges, axis=0)
     a = sparse.csr_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(V, V))
-    a = a + a.T
-    return sparse.diags(np.asarray(a.sum(axis=1)).ravel()) - a
+    return laplacian(a + a.T).tocsr()
 
 
 def render_mesh(vertices: np.ndarray, faces: np.ndarray, colours: np.ndarray, camera,
@@ -102,10 +101,11 @@ def render_mesh(vertices: np.ndarray, faces: np.ndarray, colours: np.ndarray, ca
     """(H, W, 3) float32: each pixel's first hit's barycentric colour, ``background`` (3,)
     where its ray misses (``caster``: a HitCaster of this one mesh, to reuse)."""
     from ..ndrf.hits import HitCaster
+    from ..ndrf.shader_ref import barycentric
 
     caster = caster or HitCaster([(vertices, faces)])
-    rows, tri, w = _hits(caster, camera)
-    out = np.tile(np.asarray(background, np.float32), (camera.height * camera.width, 1))
-    corners = np.asarray(faces, np.int64)[tri]
-    out[rows] = np.einsum("mk,mkc->mc", w, np.asarray(colours, np.float64)[corners])
-    return out.reshape(camera.height, camera.width, 3)
+    hits = caster.cast_camera(camera)
+    rgb = barycentric(np.asarray(colours, np.float32), np.asarray(faces), hits.tri[0],
+                      hits.bary[0])
+    return np.where((hits.tri[0] >= 0)[..., None], rgb,
+                    np.asarray(background, np.float32)).astype(np.float32)

@@ -43,7 +43,7 @@ def view_encoding(dirs: np.ndarray, n_freq: int) -> np.ndarray:
     return np.concatenate(parts, axis=-1).astype(F32)
 
 
-def _barycentric(values: np.ndarray, faces: np.ndarray, tri: np.ndarray,
+def barycentric(values: np.ndarray, faces: np.ndarray, tri: np.ndarray,
                  bary: np.ndarray) -> np.ndarray:
     """(1-u-v) values[i0] + u values[i1] + v values[i2] per hit, zeros on a miss.
 
@@ -73,8 +73,8 @@ def screen_buffer(model, tri: np.ndarray, bary: np.ndarray, dirs: np.ndarray) ->
     features, positions = [], []
     for k in range(K):
         vertices, faces, feats = model.mesh(k)
-        features.append(_barycentric(feats, faces, tri[k], bary[k]))
-        positions.append(_barycentric(vertices, faces, tri[k], bary[k]))
+        features.append(barycentric(feats, faces, tri[k], bary[k]))
+        positions.append(barycentric(vertices, faces, tri[k], bary[k]))
     view = view_encoding(dirs, model.config.n_freq)
     return np.concatenate(features + positions + [view], axis=-1).astype(F32)
 
@@ -220,7 +220,7 @@ def conv0_factored(model, tri: np.ndarray, bary: np.ndarray, dirs: np.ndarray,
     for k in range(cfg.K):
         vertices, faces, _ = model.mesh(k)
         rows = proj[offset:offset + len(vertices)].astype(np.float64)
-        geo += _barycentric(rows.reshape(len(rows), -1), faces, tri[k],
+        geo += barycentric(rows.reshape(len(rows), -1), faces, tri[k],
                             bary[k]).astype(np.float64).reshape(geo.shape)
         offset += len(vertices)
     if exact:
